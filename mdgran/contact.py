@@ -1,0 +1,287 @@
+"""Contact laws between two beads, nondimensional (units of physics.md section 1).
+
+Every quantity here is in the units of the inter-bead interaction: force in ``eta = pi R w``,
+compression ``delta`` in ``p = (pi^2 R w^2 / K^2)^(1/3)``, energy in ``eta * p``.
+
+The Schwarz law (paper Eqs. 1-2) is written with ``t = sqrt(a_hat)`` as parameter, where
+``a_hat`` is the contact radius in units of ``(R eta / K)^(1/3)``, ``s = (fc + 2) / 3`` and
+``sigma = sqrt(s)``::
+
+    delta(t) = t^4 - 4 sigma t
+    f(t)     = fc + (t^3 - 3 sigma)^2
+
+so both are polynomials in ``t``.  The attached (stable) branch is ``t >= t_min = sigma^(1/3)``,
+where ``delta`` is monotone, so ``f`` is a single-valued function of ``delta`` there.  It is
+inverted to machine precision by Newton's method on ``phi(w) = sqrt(delta - delta_min)`` with
+``w = t - t_min`` (``phi`` is increasing and convex, with ``phi'(0) > 0``, so Newton started
+above the root converges monotonically and quadratically even at the snap-off point, where
+``t(delta)`` has a square-root singularity).
+
+The contact energy on the attached branch, ``V(delta) = integral_0^delta f d delta'``, is the
+closed-form polynomial ``P(t) - P(t0)`` with ``P`` the antiderivative of ``f(t) delta'(t)`` and
+``t0 = (4 sigma)^(1/3)`` the point ``delta = 0``.
+
+Hysteresis (physics.md section 2): an open contact carries no force and closes when ``delta``
+reaches 0 from below (``delta_on = 0``); a closed contact follows the attached branch and
+opens when ``delta`` falls to ``delta_off``: the minimum ``delta_min`` of ``delta(a)`` (the
+paper's displacement rule, default) or the tensile force maximum ``f = fc`` (``snap_off =
+"force"``, as LAMMPS's ``granular jkr`` does).  On opening the closed contact's energy
+``V(delta_off)`` is lost; for the displacement rule that is the loop energy ``W``.
+
+The Hertz law is ``f = delta_+^(3/2)``, ``V = (2/5) delta_+^(5/2)``; it opens and closes at
+``delta = 0`` with no force jump.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Contact-law names a scene may use.
+LAWS = ("schwarz", "jkr", "dmt", "hertz")
+#: Snap-off rules.
+SNAP_OFF_RULES = ("displacement", "force")
+
+FC_DMT = -2.0
+FC_JKR = -1.5
+NEWTON_STEPS = 7
+
+
+def fc_from_lambda(lam: float) -> float:
+    """Transition parameter ``fc = Fc / (pi R w)`` from the Maugis parameter ``lambda``.
+
+    Carpick-Ogletree-Salmeron relation as the paper states it:
+    ``lambda = -0.924 ln(1 - 1.02 alpha)`` with ``alpha = sqrt(-3 - 6 / fc)``, so
+    ``alpha = (1 - exp(-lambda / 0.924)) / 1.02`` and ``fc = -6 / (alpha^2 + 3)``.
+    ``lambda = 0`` gives DMT (``fc = -2``); ``lambda -> inf`` gives ``fc -> -1.5147``.
+    """
+    alpha = (1.0 - math.exp(-lam / 0.924)) / 1.02
+    return -6.0 / (alpha * alpha + 3.0)
+
+
+def lambda_from_fc(fc: float) -> float:
+    """Inverse of :func:`fc_from_lambda` (``inf`` where ``fc`` is beyond the fit's range)."""
+    alpha = math.sqrt(max(-3.0 - 6.0 / fc, 0.0))
+    arg = 1.0 - 1.02 * alpha
+    return math.inf if arg <= 0.0 else -0.924 * math.log(arg)
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """One contact law with its hysteresis rule.
+
+    ``kind`` is ``"schwarz"`` (JKR and DMT are Schwarz laws with ``fc = -1.5`` and ``-2``) or
+    ``"hertz"``.  ``fc`` is ignored for Hertz.  All methods take and return nondimensional
+    values and accept numpy arrays.
+    """
+
+    kind: str = "schwarz"
+    fc: float = -1.8518
+    snap_off: str = "displacement"
+
+    def __post_init__(self):
+        if self.kind not in ("schwarz", "hertz"):
+            raise ValueError(f"contact kind must be 'schwarz' or 'hertz', not {self.kind!r}")
+        if self.kind == "schwarz" and not (FC_DMT <= self.fc <= FC_JKR):
+            raise ValueError(f"fc must lie in [-2, -1.5], not {self.fc}")
+        if self.snap_off not in SNAP_OFF_RULES:
+            raise ValueError(f"snap_off must be one of {SNAP_OFF_RULES}, not {self.snap_off!r}")
+
+    # ---- constants of the law -------------------------------------------------------------
+    @property
+    def s(self) -> float:
+        return (self.fc + 2.0) / 3.0 if self.kind == "schwarz" else 0.0
+
+    @property
+    def sigma(self) -> float:
+        return math.sqrt(max(self.s, 0.0))
+
+    @property
+    def t_min(self) -> float:
+        """Parameter ``t = sqrt(a)`` at the minimum of ``delta(a)``: ``t_min^3 = sigma``."""
+        return self.sigma ** (1.0 / 3.0)
+
+    @property
+    def hysteretic(self) -> bool:
+        """True when the law has a force jump on closing (Schwarz; DMT too, with zero loop)."""
+        return self.kind == "schwarz"
+
+    @property
+    def delta_min(self) -> float:
+        """Smallest compression on the attached branch, ``t_min^4 - 4 sigma t_min``."""
+        tm = self.t_min
+        return tm**4 - 4.0 * self.sigma * tm
+
+    @property
+    def delta_force_max(self) -> float:
+        """Compression at the tensile force maximum ``f = fc`` (``t^3 = 3 sigma``)."""
+        t = (3.0 * self.sigma) ** (1.0 / 3.0)
+        return t**4 - 4.0 * self.sigma * t
+
+    @property
+    def delta_on(self) -> float:
+        """An open contact closes when ``delta`` rises to this value."""
+        return 0.0
+
+    @property
+    def delta_off(self) -> float:
+        """A closed contact opens when ``delta`` falls to this value."""
+        if self.kind == "hertz":
+            return 0.0
+        return self.delta_min if self.snap_off == "displacement" else self.delta_force_max
+
+    @property
+    def f_on(self) -> float:
+        """Force just after snap-to-contact at ``delta = 0``: ``fc + s`` (0 for Hertz)."""
+        return self.fc + self.s if self.kind == "schwarz" else 0.0
+
+    @property
+    def f_off(self) -> float:
+        """Force just before snap-off at ``delta_off``: ``fc + 4 s`` (displacement rule), ``fc``
+        (force rule), 0 for Hertz."""
+        return float(self.force(self.delta_off))
+
+    @property
+    def loop_energy(self) -> float:
+        """Energy lost per open event, ``V(delta_off)``; with the displacement rule this is
+        ``W = -integral_{delta_min}^0 f d delta``."""
+        return float(self.energy(self.delta_off))
+
+    @property
+    def delta_eq(self) -> float:
+        """Natural equilibrium (``f = 0``) on the attached branch."""
+        if self.kind == "hertz":
+            return 0.0
+        t = (3.0 * self.sigma + math.sqrt(-self.fc)) ** (1.0 / 3.0)
+        return t**4 - 4.0 * self.sigma * t
+
+    @property
+    def stiffness_eq(self) -> float:
+        """``df/d delta`` at the natural equilibrium."""
+        if self.kind == "hertz":
+            return 0.0
+        return float(self.stiffness(self.delta_eq))
+
+    # ---- the law as functions of delta ----------------------------------------------------
+    def t_of_delta(self, delta):
+        """Branch parameter ``t >= t_min`` with ``t^4 - 4 sigma t = delta`` (Schwarz only).
+
+        Below ``delta_min`` the value is clamped to ``t_min`` (the force then stays at ``f_off``,
+        a continuous extension used only inside an integration step that overshoots an event).
+        """
+        d = np.asarray(delta, dtype=float)
+        tm = self.t_min
+        big = 6.0 * tm * tm
+        rhs = np.sqrt(np.maximum(d - self.delta_min, 0.0))  # target value of phi(w)
+        # Newton on phi(w) = w sqrt(w^2 + 4 tm w + 6 tm^2) = rhs from an upper bound: phi >=
+        # max(sqrt(6) tm w, w^2), so w0 = min(rhs / (sqrt(6) tm), sqrt(rhs)) is above the root.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.sqrt(rhs) if tm == 0.0 else np.minimum(rhs / math.sqrt(big), np.sqrt(rhs))
+        if tm == 0.0:
+            return w  # DMT: phi(w) = w^2, exact
+        # The start is within 30 % of the root over the whole branch; quadratic convergence
+        # reaches round-off after 5 steps (0.29, 4e-2, 8e-4, 3e-7, 4e-14, 2e-16): 7 is a margin.
+        for _ in range(NEWTON_STEPS):
+            sq = np.sqrt(w * w + 4.0 * tm * w + big)
+            w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq)
+        return tm + np.maximum(w, 0.0)
+
+    def force(self, delta):
+        """Force on the attached branch (positive = repulsive), for a closed contact."""
+        d = np.asarray(delta, dtype=float)
+        if self.kind == "hertz":
+            dp = np.maximum(d, 0.0)
+            return dp * np.sqrt(dp)
+        t = self.t_of_delta(d)
+        u = t**3 - 3.0 * self.sigma
+        return self.fc + u * u
+
+    def stiffness(self, delta):
+        """``df/d delta`` on the attached branch (infinite at ``delta_min``)."""
+        d = np.asarray(delta, dtype=float)
+        if self.kind == "hertz":
+            return 1.5 * np.sqrt(np.maximum(d, 0.0))
+        t = self.t_of_delta(d)
+        with np.errstate(divide="ignore"):
+            return 6.0 * t * t * (t**3 - 3.0 * self.sigma) / (4.0 * (t**3 - self.sigma))
+
+    def _antiderivative(self, t):
+        sg, fc = self.sigma, self.fc
+        return (0.4 * t**10 - 4.0 * sg * t**7 + (fc + 15.0 * sg * sg) * t**4
+                - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
+
+    def energy(self, delta):
+        """Energy of a closed contact, ``V(delta) = integral_0^delta f`` on the attached branch.
+
+        Zero at ``delta = 0``, so closing at ``delta = 0`` leaves the energy continuous.
+        """
+        d = np.asarray(delta, dtype=float)
+        if self.kind == "hertz":
+            dp = np.maximum(d, 0.0)
+            return 0.4 * dp * dp * np.sqrt(dp)
+        t0 = (4.0 * self.sigma) ** (1.0 / 3.0)
+        return self._antiderivative(self.t_of_delta(d)) - self._antiderivative(t0)
+
+    def describe(self) -> dict:
+        """The law's characteristic values (physics.md check table), nondimensional."""
+        return {
+            "law": self.kind,
+            "fc": self.fc if self.kind == "schwarz" else None,
+            "snap_off": self.snap_off,
+            "delta_min": self.delta_min if self.kind == "schwarz" else 0.0,
+            "delta_off": self.delta_off,
+            "f_on": self.f_on,
+            "f_off": self.f_off,
+            "loop_energy": self.loop_energy,
+            "delta_eq": self.delta_eq,
+            "stiffness_eq": self.stiffness_eq,
+        }
+
+    def tabulate(self, n: int = 2001, delta_max: float = 10.0):
+        """Table of the attached branch on ``[delta_off, delta_max]``.
+
+        Returns ``(delta, force, energy)``, ``n`` points each, spaced uniformly in the branch
+        parameter ``t`` (dense where the force varies fast, near snap-off) for Schwarz, and
+        uniformly in ``delta`` for Hertz.  See :func:`table_error` for the interpolation error.
+        """
+        if self.kind == "hertz":
+            d = np.linspace(0.0, delta_max, n)
+        else:
+            t_lo = float(self.t_of_delta(self.delta_off))
+            t_hi = float(self.t_of_delta(delta_max))
+            t = np.linspace(t_lo, t_hi, n)
+            d = t**4 - 4.0 * self.sigma * t
+            d[0], d[-1] = self.delta_off, delta_max
+        return d, self.force(d), self.energy(d)
+
+
+def law_from_contact_table(contact: dict) -> ContactLaw:
+    """Build the law from a scene's ``[contact]`` table (already validated)."""
+    law = contact.get("law", "schwarz")
+    snap = contact.get("snap_off", "displacement")
+    if law == "hertz":
+        return ContactLaw("hertz", 0.0, "displacement")
+    if law == "jkr":
+        return ContactLaw("schwarz", FC_JKR, snap)
+    if law == "dmt":
+        return ContactLaw("schwarz", FC_DMT, snap)
+    if contact.get("fc") is not None:
+        return ContactLaw("schwarz", float(contact["fc"]), snap)
+    return ContactLaw("schwarz", fc_from_lambda(float(contact.get("lambda", 0.64))), snap)
+
+
+def table_error(law: ContactLaw, n: int, delta_max: float = 10.0, kind: str = "linear") -> dict:
+    """Largest interpolation error of a table of ``n`` points, measured on a 20x finer grid.
+
+    ``kind`` is ``"linear"`` (what LAMMPS-style lookup does).  Returns absolute errors of force
+    and energy, and the force error relative to the largest force in the table.
+    """
+    d, f, e = law.tabulate(n, delta_max)
+    dd = np.sort(np.concatenate([law.tabulate(20 * n, delta_max)[0], d]))
+    f_int = np.interp(dd, d, f)
+    e_int = np.interp(dd, d, e)
+    ef = np.max(np.abs(f_int - law.force(dd)))
+    ee = np.max(np.abs(e_int - law.energy(dd)))
+    return {"points": n, "force_abs": float(ef), "energy_abs": float(ee),
+            "force_rel": float(ef / np.max(np.abs(f)))}
