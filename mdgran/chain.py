@@ -1,0 +1,155 @@
+"""The chain model: equations of motion (paper Eq. 6) and the energy ledger, nondimensional.
+
+Bead mass is 1.  ``x[i]`` is the displacement of moving bead ``i`` (0-based here; the paper's
+bead ``i + 1``) from its initial place.  Contacts:
+
+* ``boundary = "fixed"``: ``n + 1`` contacts; contact ``k`` (0-based, the contract's contact
+  number ``k + 1``) joins bead ``k - 1`` and bead ``k``, beads ``-1`` and ``n`` being walls
+  at ``x = 0``.
+* ``boundary = "free"``: ``n - 1`` contacts between neighbouring beads (contract numbers
+  ``2..n``).
+
+Compression of a contact: ``delta = x_left - x_right - gap``.  With ``F`` the force of each
+closed contact (law force plus unilateral damping ``c * d delta/dt``; zero when open)::
+
+    x_i'' = F_i - F_(i+1) - k1 x_i - k3 x_i^3
+
+Terms switched off by the scene (``k1 = 0``, ``k3 = 0``, ``damping = 0``) are not evaluated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .contact import ContactLaw
+
+
+@dataclass(frozen=True)
+class ChainModel:
+    n: int
+    law: ContactLaw
+    boundary: str = "fixed"
+    damping: float = 0.0
+    k1: float = 0.0
+    k3: float = 0.0
+    gap: float = 0.0
+    walls: bool = field(init=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "walls", self.boundary == "fixed")
+
+    # ---- geometry --------------------------------------------------------------------------
+    @property
+    def n_contacts(self) -> int:
+        return self.n + 1 if self.walls else self.n - 1
+
+    @property
+    def contact_numbers(self) -> np.ndarray:
+        """Contract numbering of the contacts (1..n+1 with walls, 2..n for a free chain)."""
+        return np.arange(1, self.n + 2) if self.walls else np.arange(2, self.n + 1)
+
+    def differences(self, x):
+        """``x_left - x_right`` for every contact (walls at 0)."""
+        if self.walls:
+            d = np.empty(self.n + 1)
+            d[0] = -x[0]
+            d[1:-1] = x[:-1] - x[1:]
+            d[-1] = x[-1]
+            return d
+        return x[:-1] - x[1:]
+
+    def compressions(self, x):
+        d = self.differences(x)
+        return d - self.gap if self.gap else d
+
+    def _apply(self, f):
+        """Net force on each bead from per-contact forces ``f`` (``f_i - f_(i+1)``)."""
+        if self.walls:
+            return f[:-1] - f[1:]
+        a = np.zeros(self.n)
+        a[1:] += f
+        a[:-1] -= f
+        return a
+
+    # ---- dynamics --------------------------------------------------------------------------
+    def contact_forces(self, x, v, closed):
+        """Per-contact force (law plus unilateral damping), zero on open contacts."""
+        delta = self.compressions(x)
+        f = self.law.force(delta)
+        if self.damping:
+            f = f + self.damping * self.differences(v)
+        return np.where(closed, f, 0.0)
+
+    def substrate_force(self, x):
+        if self.k3:
+            return -(self.k1 + self.k3 * x * x) * x
+        if self.k1:
+            return -self.k1 * x
+        return None
+
+    def acceleration(self, x, v, closed):
+        a = self._apply(self.contact_forces(x, v, closed))
+        s = self.substrate_force(x)
+        return a if s is None else a + s
+
+    def viscous_power(self, v, closed):
+        """Rate of viscous dissipation, ``sum_closed c (d delta/dt)^2``."""
+        if not self.damping:
+            return 0.0
+        dv = self.differences(v)
+        return self.damping * float(np.sum(np.where(closed, dv * dv, 0.0)))
+
+    # ---- energy ledger ---------------------------------------------------------------------
+    def kinetic_energy(self, v) -> float:
+        return 0.5 * float(np.dot(v, v))
+
+    def contact_energy(self, x, closed) -> float:
+        delta = self.compressions(x)
+        return float(np.sum(np.where(closed, self.law.energy(delta), 0.0)))
+
+    def substrate_energy(self, x) -> float:
+        e = 0.0
+        if self.k1:
+            e += 0.5 * self.k1 * float(np.dot(x, x))
+        if self.k3:
+            e += 0.25 * self.k3 * float(np.sum(x**4))
+        return e
+
+    def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis) -> dict:
+        """The energy ledger of physics.md section 4 for one state."""
+        led = {
+            "kinetic_energy": self.kinetic_energy(v),
+            "contact_energy": self.contact_energy(x, closed),
+            "substrate_energy": self.substrate_energy(x),
+            "dissipated_viscous": float(dissipated_viscous),
+            "dissipated_hysteresis": float(dissipated_hysteresis),
+        }
+        led["total_energy"] = sum(led.values())
+        return led
+
+    def initial_state(self, bead: int, velocity: float, closed: bool = True):
+        """Paper's initial state: beads at rest at x = 0 except ``bead`` (1-based); every
+        contact closed at ``delta = 0`` (open when the scene has an initial gap).  A backend
+        then opens at once any contact that sits on its snap-off point moving outward (the
+        wall contact behind the struck bead, for DMT and Hertz)."""
+        x = np.zeros(self.n)
+        v = np.zeros(self.n)
+        v[bead - 1] = velocity
+        return x, v, np.full(self.n_contacts, bool(closed) and self.gap <= 0.0)
+
+
+def model_from_scene(scene) -> "ChainModel":
+    """Build the model from a resolved scene (see :mod:`mdgran.scene`)."""
+    from .contact import law_from_contact_table
+
+    d = scene.data
+    return ChainModel(
+        n=int(d["chain"]["n"]),
+        law=law_from_contact_table(d["contact"]),
+        boundary=d["chain"]["boundary"],
+        damping=float(d["contact"]["damping"]),
+        k1=float(d["substrate"]["k1"]),
+        k3=float(d["substrate"]["k3"]),
+        gap=float(d["chain"]["initial_gap"]),
+    )
