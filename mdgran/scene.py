@@ -74,7 +74,7 @@ SCHEMA = {
     "material": {
         "diameter": (None, "float>0?", "a finite number > 0 in m"),
         "E": (None, "float>0?", "a finite number > 0 in Pa"),
-        "nu": (None, "nu", "a number in [0, 0.5)"),
+        "nu": (None, "nu?", "a number in [0, 0.5)"),
         "w": (None, "float>0?", "a finite number > 0 in J/m^2"),
         "density": (None, "float>0?", "a finite number > 0 in kg/m^3"),
         "modulus": ("table", ("table", "text"), "'table' (K = E/(2(1-nu^2))) or 'text'"),
@@ -252,6 +252,7 @@ def _derive_si(data: dict, raw: dict):
         if power == 3:  # K3 x^3: K3_hat = K3 p^2 / (eta/p)
             value = data[sec][name] * scales.p**2 / scales.stiffness
         data[tsec][tname] = value
+        data[sec][name] = None  # consumed: the resolved scene holds the nondimensional key
 
 
 def load_scene(spec: str, overrides=()) -> Scene:

@@ -114,17 +114,14 @@ class Scales:
 def scales_from_material(mat: dict) -> Scales:
     """Scales from a scene's ``[material]`` table (keys: diameter, E, nu, w, density,
     modulus, optional K and D0); missing keys take the paper's alumina values."""
-    E = float(mat.get("E", ALUMINA["E"]))
-    nu = float(mat.get("nu", ALUMINA["nu"]))
+    def get(key):
+        return float(mat[key]) if mat.get(key) is not None else ALUMINA[key]
+
     K = mat.get("K")
-    K = float(K) if K is not None else contact_modulus(E, nu, mat.get("modulus", "table"))
-    return Scales(
-        diameter=float(mat["diameter"]),
-        K=K,
-        w=float(mat.get("w", ALUMINA["w"])),
-        density=float(mat.get("density", ALUMINA["density"])),
-        D0=float(mat.get("D0", ALUMINA["D0"])),
-    )
+    K = float(K) if K is not None else contact_modulus(get("E"), get("nu"),
+                                                       mat.get("modulus") or "table")
+    return Scales(diameter=float(mat["diameter"]), K=K, w=get("w"), density=get("density"),
+                  D0=get("D0"))
 
 
 def wire_tension(k1: float, length: float) -> float:
