@@ -1,0 +1,293 @@
+"""The reference backend: event-driven integration, as the paper integrates (Sec. II, end).
+
+Between contact events the equations of motion are smooth and are integrated with SciPy's
+DOP853 (explicit Runge-Kutta of order 8, dense output of order 7) at ``rtol = atol =
+run.tolerance``.  The state vector is ``[x (n), v (n), D_viscous]``: the viscous dissipation is
+integrated with the motion, so the energy ledger closes to the integrator's accuracy.
+
+**Events.**  Every contact has an event function that is positive inside its current state::
+
+    closed:  g = delta - delta_off        (opens when g falls to 0)
+    open:    g = -delta                   (closes when delta rises to 0)
+
+After each accepted step, a contact is an event candidate when
+
+* ``g`` went from >= 0 to < 0 across the step (a crossing), or
+* ``g`` stayed positive at both ends but its rate ``g'`` went from negative to positive and
+  ``g`` at the rate's zero (found with ``brentq`` on the dense output) is <= 0: a grazing
+  excursion inside one step, which sign checks at the step ends alone would miss.
+
+Each candidate's crossing time is located with ``brentq`` on the step's dense output to
+``4 eps |t|``; the earliest is the event.  All candidates within ``1e-12 (1 + |t|)`` of it switch
+together (several events at one instant), the state is switched, and integration restarts there.
+
+**Switching policy** (no re-trigger loop, no endless chatter).  A contact switches only if it
+moves into its new state's domain, judged by the relative velocity ``d delta/dt`` (its sign
+tells which side it goes to).  A contact that sits on its switching point at the start of a
+segment (``g <= 0``, as after a switch of a DMT or Hertz contact, whose ``delta_off = 0``, or in
+the initial state) is switched at once if it moves outward and left alone otherwise; it is a
+candidate again only if it ends a step further outside than it started.  A contact that would
+switch more than ``MAX_SWITCHES_AT_ONE_INSTANT`` times without time advancing is a modelling
+dead end (Zeno chatter): the run stops with :class:`IntegrationError`, naming the contact.
+
+**Ledger.**  On opening, the contact's energy ``V(delta(t_e))`` goes to ``D_hysteresis``; for
+the displacement rule that is the loop energy ``W``, to the accuracy of the event location.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+
+import numpy as np
+from scipy.integrate import DOP853
+from scipy.optimize import brentq
+
+from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+
+MAX_SWITCHES_AT_ONE_INSTANT = 4
+SIMULTANEOUS = 1e-12
+#: A pending contact switches when its event function is at most this (units of p).
+EVENT_G_TOL = 1e-13
+#: Tolerance factor for steps that approach a snap-off (see ``_near_snap_off``) and for the
+#: redone step that ends on an event.
+EVENT_TIGHTEN = 1e-3
+#: Tighten when a snap-off is predicted within this many steps.
+NEAR_STEPS = 3.0
+
+
+class ReferenceBackend(Backend):
+    """Event-driven DOP853 integration at ``run.tolerance``; the accuracy oracle."""
+
+    name = "reference"
+
+    def __init__(self, scene, **options):
+        super().__init__(scene, **options)
+        self.tol = float(options.get("tolerance", scene.data["run"]["tolerance"]))
+        m = self.model
+        self.n = m.n
+        self.delta_off = m.law.delta_off
+        law = m.law
+        self._singular_snap_off = (law.kind == "schwarz" and law.snap_off == "displacement"
+                                   and law.fc > -2.0)
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0,
+                      "wall_time_s": 0.0, "method": "DOP853 event-driven", "tolerance": self.tol}
+
+    # ---- right-hand side and event functions ---------------------------------------------
+    def _rhs_factory(self, closed):
+        m = self.model
+        n = self.n
+        any_closed = bool(closed.any())
+
+        def rhs(t, y):
+            x = y[:n]
+            v = y[n:2 * n]
+            out = np.empty_like(y)
+            out[:n] = v
+            if any_closed:
+                out[n:2 * n] = m.acceleration(x, v, closed)
+            else:
+                s = m.substrate_force(x)
+                out[n:2 * n] = 0.0 if s is None else s
+            out[2 * n] = m.viscous_power(v, closed)
+            return out
+
+        return rhs
+
+    def _g(self, y, closed):
+        """Event function (positive inside the current state) and its rate, per contact."""
+        n = self.n
+        delta = self.model.compressions(y[:n])
+        rate = self.model.differences(y[n:2 * n])
+        g = np.where(closed, delta - self.delta_off, -delta)
+        gdot = np.where(closed, rate, -rate)
+        return g, gdot
+
+    def _near_snap_off(self, g, gd, h):
+        """True when a closed contact is predicted to reach its snap-off point within
+        ``NEAR_STEPS`` steps of size ``h`` (linear extrapolation of ``g``), and the law is
+        singular there (displacement rule of a hysteretic law: ``df/d delta`` is infinite at
+        ``delta_min``)."""
+        if not self._singular_snap_off or h is None:
+            return False
+        approaching = self._closed & (gd < 0.0)
+        return bool(np.any(g[approaching] < -gd[approaching] * NEAR_STEPS * h))
+
+    # ---- event handling ------------------------------------------------------------------
+    def _candidates(self, sol, t0, t1, g0, gd0, g1, gd1, armed_out):
+        """(root time, contact) pairs for contacts that leave their state in [t0, t1]."""
+        out = []
+        crossing = (g0 >= 0.0) & (g1 < 0.0)
+        further_out = (g0 < 0.0) & (g1 < g0) & armed_out
+        grazing = (g0 > 0.0) & (g1 > 0.0) & (gd0 < 0.0) & (gd1 > 0.0)
+        for k in np.flatnonzero(crossing):
+            out.append((self._root(sol, k, t0, t1, g0[k]), k))
+        for k in np.flatnonzero(further_out):
+            out.append((t0, k))
+        for k in np.flatnonzero(grazing):
+            try:
+                tm = brentq(lambda t: self._gk(sol(t), k)[1], t0, t1, xtol=1e-15, rtol=1e-15)
+            except ValueError:
+                continue
+            if self._gk(sol(tm), k)[0] <= 0.0:
+                out.append((self._root(sol, k, t0, tm, g0[k]), k))
+        return out
+
+    def _gk(self, y, k):
+        g, gd = self._g(y, self._closed)
+        return g[k], gd[k]
+
+    def _root(self, sol, k, t0, t1, g0k):
+        if g0k <= 0.0:
+            return t0
+        f = lambda t: self._gk(sol(t), k)[0]  # noqa: E731
+        return brentq(f, t0, t1, xtol=4e-16 * max(1.0, abs(t1)), rtol=1e-15)
+
+    def _switch(self, t, y, ks, events):
+        """Switch contacts ``ks`` at time ``t`` (state ``y``): hysteresis loss and events."""
+        m = self.model
+        nums = m.contact_numbers
+        delta = m.compressions(y[:self.n])
+        for k in ks:
+            if self._closed[k]:
+                self._d_hyst += float(m.law.energy(delta[k]))
+                self._closed[k] = False
+                events.append(Event(t, int(nums[k]), OPEN))
+            else:
+                self._closed[k] = True
+                events.append(Event(t, int(nums[k]), CLOSE))
+        self.stats["events"] += len(ks)
+
+    def _settle(self, t, y, events):
+        """Switch at once every contact on or over its switching point moving outward."""
+        count = {}
+        while True:
+            g, gd = self._g(y, self._closed)
+            ks = np.flatnonzero((g <= 0.0) & (gd < 0.0))
+            if ks.size == 0:
+                return
+            for k in ks:
+                count[k] = count.get(k, 0) + 1
+                if count[k] > MAX_SWITCHES_AT_ONE_INSTANT:
+                    raise IntegrationError(
+                        f"contact {self.model.contact_numbers[k]} chatters at t = {t:.12g}: "
+                        f"it switches state more than {MAX_SWITCHES_AT_ONE_INSTANT} times "
+                        f"at one instant (delta = {self.model.compressions(y[:self.n])[k]:.3g})")
+            self._switch(t, y, ks, events)
+
+    # ---- main loop -----------------------------------------------------------------------
+    def frames(self):
+        """Integrate the scene; yield a Frame at every output time.
+
+        The loop runs DOP853 from ``(t, y)`` towards ``target``: the next output time, so that
+        every stored frame is the integrator's own state, not an interpolant.  When an accepted step
+        ``[t0, t1]`` contains an event at ``te < t1``, the step is discarded and integration
+        restarts from ``(t0, y0)`` with ``target = te``, so the solver's own step-size control
+        resolves the approach to the event (at snap-off the force has a square-root
+        singularity that a dense-output polynomial across the kink would smear).  On reaching
+        the target, the pending contacts switch if they stand on their switching point
+        (``g <= EVENT_G_TOL``); if they fall short, the target moves on by ``g / |g'|``.
+        """
+        m, n, tol = self.model, self.n, self.tol
+        imp = self.scene.data["impulse"]
+        x, v, closed = m.initial_state(int(imp["bead"]), float(imp["velocity"]))
+        self._closed = closed
+        self._d_hyst = 0.0
+        y = np.concatenate([x, v, [0.0]])
+        t = 0.0
+        out_times = self.output_times()
+        events: list = []
+        wall0 = _time.perf_counter()
+        self._settle(t, y, events)
+        yield self._frame(0, 0.0, y, events)
+        events = []
+        i_out = 1
+        h_last = None
+        armed_out = self._g(y, self._closed)[0] <= 0.0
+        target, pending = float(out_times[1]), None
+        rhs = self._rhs_factory(self._closed.copy())
+        switches_here = {}
+        while True:
+            restart = None
+            if target > t:
+                self.stats["segments"] += 1
+                # the approach to an event (pending) runs at a tighter tolerance: at snap-off the
+                # force has a square-root singularity, where a step's error estimate is weakest
+                g0, gd0 = self._g(y, self._closed)
+                tight = pending is not None or self._near_snap_off(g0, gd0, h_last)
+                tl = tol * EVENT_TIGHTEN if tight else tol
+                solver = DOP853(rhs, t, y, target, rtol=tl, atol=tl,
+                                first_step=min(h_last, target - t) if h_last else None)
+                accept_and_tighten = False
+                while solver.status == "running":
+                    t0, y0 = solver.t, solver.y.copy()
+                    msg = solver.step()
+                    if solver.status == "failed":
+                        raise IntegrationError(f"integrator failed at t = {t0:.12g}: {msg}")
+                    self.stats["steps"] += 1
+                    t1, y1 = solver.t, solver.y
+                    if not np.all(np.isfinite(y1)):
+                        bad = int(np.flatnonzero(~np.isfinite(y1[:2 * n]))[0] % n) + 1
+                        raise IntegrationError(f"non-finite state at t = {t1:.12g}, bead {bad}")
+                    g1, gd1 = self._g(y1, self._closed)
+                    sol = None
+                    if np.any(g1 < 0.0) or np.any((gd0 < 0.0) & (gd1 > 0.0)):
+                        sol = solver.dense_output()
+                        cands = self._candidates(sol, t0, t1, g0, gd0, g1, gd1, armed_out)
+                        if cands:
+                            te = min(c[0] for c in cands)
+                            if te < t1 - SIMULTANEOUS * (1.0 + abs(t1)):
+                                ks = {k for tc, k in cands
+                                      if tc <= te + SIMULTANEOUS * (1.0 + abs(te))}
+                                restart = (t0, y0, te, ks)
+                                h_last = max(te - t0, 1e-3 * (solver.step_size or 1.0))
+                                break
+                    g0, gd0 = g1, gd1
+                    armed_out &= g1 <= 0.0
+                    if not tight and self._near_snap_off(g1, gd1, solver.h_abs):
+                        accept_and_tighten = True
+                        break
+                self.stats["rhs_evals"] += solver.nfev
+                if restart is None:
+                    t, y = solver.t, solver.y.copy()
+                    h_last = getattr(solver, "h_abs", None) or solver.step_size or h_last
+                    if accept_and_tighten:
+                        continue
+            if restart is not None:
+                t, y, target, new = restart
+                pending = new if pending is None or target < t else pending | new
+                pending = new
+                continue
+            if pending is None:  # reached an output time: the frame is the solver's own state
+                yield self._frame(i_out, out_times[i_out], y, events)
+                events = []
+                i_out += 1
+                if i_out == len(out_times):
+                    break
+                target = float(out_times[i_out])
+                continue
+            g, gd = self._g(y, self._closed)
+            ks = sorted(pending)
+            short = [k for k in ks if g[k] > EVENT_G_TOL and gd[k] < 0.0]
+            if short and (max(g[k] / -gd[k] for k in short) > 4e-16 * max(1.0, abs(t))):
+                target = min(float(out_times[i_out]), t + max(g[k] / -gd[k] for k in short))
+                continue
+            ks = [k for k in ks if g[k] <= EVENT_G_TOL or gd[k] < 0.0]
+            for k in ks:
+                switches_here[(t, k)] = switches_here.get((t, k), 0) + 1
+                if switches_here[(t, k)] > MAX_SWITCHES_AT_ONE_INSTANT:
+                    raise IntegrationError(f"contact {m.contact_numbers[k]} chatters at "
+                                           f"t = {t:.12g}")
+            if len(switches_here) > 256:
+                switches_here.clear()
+            self._switch(t, y, ks, events)
+            self._settle(t, y, events)
+            armed_out = self._g(y, self._closed)[0] <= 0.0
+            rhs = self._rhs_factory(self._closed.copy())
+            target, pending = float(out_times[i_out]), None
+        self.stats["wall_time_s"] = _time.perf_counter() - wall0
+
+    def _frame(self, step, t, y, events):
+        n = self.n
+        return Frame(step=step, time=float(t), x=np.array(y[:n]), v=np.array(y[n:2 * n]),
+                     closed=self._closed.copy(), dissipated_viscous=float(y[2 * n]),
+                     dissipated_hysteresis=self._d_hyst, events=list(events))
