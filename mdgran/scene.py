@@ -271,6 +271,10 @@ def load_scene(spec: str, overrides=()) -> Scene:
         raise SceneError("SCENE", f"{path} is not valid TOML: {exc}") from None
     for key, value in overrides:
         _set_key(raw, key, value)
+        # an override of one way of giving the law replaces the other
+        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key)
+        if other:
+            raw["contact"].pop(other, None)
     return Scene(name, resolve(raw))
 
 

@@ -1,0 +1,159 @@
+"""Command line: ``mdgran scenes | info | run`` (contract.md).
+
+Exit status: 0 success; 2 bad input (one line on stderr naming the key and what is allowed,
+no traceback, no output file); 1 a failure during a run (the output file is written first,
+with every frame so far and its ``status`` attribute saying what failed).  Heavy imports are
+done inside the subcommands so that ``mdgran scenes`` starts fast.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+class UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse prints usage + two lines)
+        raise UsageError(message)
+
+
+def _fail(message: str, status: int) -> int:
+    print(f"mdgran: error: {message}", file=sys.stderr)
+    return status
+
+
+def _load(args):
+    from .scene import load_scene, parse_override
+
+    overrides = [parse_override(s) for s in (args.set or [])]
+    return load_scene(args.scene, overrides)
+
+
+# ---- subcommands -----------------------------------------------------------------------
+def cmd_scenes(args) -> int:
+    from .scene import builtin_scenes, describe
+
+    names = builtin_scenes()
+    width = max(len(n) for n in names)
+    for name in names:
+        print(f"{name:<{width}}  {describe(name)}")
+    return 0
+
+
+def scene_info(scene) -> dict:
+    """The derived values that ``mdgran info`` prints (nondimensional, plus SI scales)."""
+    from .contact import lambda_from_fc, table_error
+
+    law = scene.law
+    d = scene.data
+    info = {"scene": scene.name, **law.describe()}
+    if law.kind == "schwarz":
+        info["contact_lambda"] = lambda_from_fc(law.fc)  # lambda the law's fc stands for
+    info.update({
+        "n": d["chain"]["n"], "boundary": d["chain"]["boundary"],
+        "k1": d["substrate"]["k1"], "k3": d["substrate"]["k3"],
+        "damping": d["contact"]["damping"], "impulse_velocity": d["impulse"]["velocity"],
+        "impulse_energy": scene.impulse_energy,
+    })
+    if law.kind == "schwarz":
+        info["table_error_2001"] = table_error(law, 2001)
+    sc = scene.scales
+    if sc is not None:
+        from .units import wire_tension
+
+        info.update(sc.as_dict())
+        info["k1_N_per_m"] = d["substrate"]["k1"] * sc.stiffness
+        info["damping_Ns_per_m"] = d["contact"]["damping"] * sc.damping
+        info["impulse_velocity_m_per_s"] = d["impulse"]["velocity"] * sc.velocity
+        info["impulse_energy_J"] = scene.impulse_energy * sc.energy
+        # paper Table II geometry: wire length L_s = 2.5 d
+        info["wire_tension_N"] = wire_tension(info["k1_N_per_m"], 2.5 * sc.diameter)
+    return info
+
+
+def cmd_info(args) -> int:
+    scene = _load(args)
+    info = scene_info(scene)
+    if args.json:
+        print(json.dumps(info, indent=2, default=float))
+        return 0
+    for k, v in info.items():
+        if isinstance(v, float):
+            v = f"{v:.6g}"
+        print(f"{k:<28} {v}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .backends.base import IntegrationError
+    from .simulation import run
+
+    scene = _load(args)
+    try:
+        res = run(scene, args.backend, out=args.out, progress=not args.quiet, keep=False,
+                  raise_errors=False)
+    except IntegrationError as exc:  # pragma: no cover - run() reports via status
+        return _fail(str(exc), 1)
+    if res.error is not None:
+        return _fail(f"run failed ({args.out} holds the frames so far): {res.error}", 1)
+    if not args.quiet:
+        st = res.stats
+        print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
+              f"{st.get('events', '?')} events, wall {st.get('wall_time_s', float('nan')):.2f} s, "
+              f"ledger error {res.max_ledger_error:.2e} of E_imp")
+    return 0
+
+
+# ---- parser ----------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="mdgran", description="Adhesive micro-granular chain simulations.")
+    sub = p.add_subparsers(dest="command", parser_class=_Parser)
+    sub.required = True
+
+    s = sub.add_parser("scenes", help="list built-in scenes")
+    s.set_defaults(func=cmd_scenes)
+
+    def scene_args(sp):
+        sp.add_argument("scene", help="built-in scene name or path to a TOML file")
+        sp.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scene key, e.g. contact.lambda=1.5 (repeatable)")
+
+    s = sub.add_parser("info", help="derived scales and contact-law values")
+    scene_args(s)
+    s.add_argument("--json", action="store_true", help="one JSON object")
+    s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("run", help="run a scene on one backend, write H5MD")
+    scene_args(s)
+    s.add_argument("--backend", default="reference", help="reference | lammps | fast")
+    s.add_argument("--out", required=True, help="output file (.h5)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.set_defaults(func=cmd_run)
+    return p
+
+
+def main(argv=None) -> int:
+    from .scene import SceneError
+    from .simulation import BackendUnavailable
+
+    try:
+        args = build_parser().parse_args(argv)
+        return args.func(args)
+    except UsageError as exc:
+        return _fail(str(exc), 2)
+    except SceneError as exc:
+        return _fail(str(exc), 2)
+    except BackendUnavailable as exc:
+        return _fail(str(exc), 2)
+    except KeyboardInterrupt:
+        return _fail("interrupted", 130)
+    except BrokenPipeError:  # output piped into head & co.
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

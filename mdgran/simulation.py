@@ -1,0 +1,92 @@
+"""The driver: run a scene on a backend and hand each frame to the reporters.
+
+Example::
+
+    from mdgran.scene import load_scene
+    from mdgran.simulation import run
+    result = run(load_scene("micro-star", [("run.duration", 50.0)]), "reference")
+    traj = result.trajectory          # arrays in memory
+    print(result.max_ledger_error)    # max |total - E0| / E_imp over the frames
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .backends import BACKENDS, get_backend
+from .backends.base import IntegrationError
+from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
+from .scene import SceneError
+
+
+class BackendUnavailable(RuntimeError):
+    """The backend cannot run here (for example LAMMPS is not installed): one line."""
+
+
+@dataclass
+class RunResult:
+    trajectory: object
+    stats: dict
+    status: str
+    max_ledger_error: float  # relative to the impulse energy (or to |E0| if no impulse)
+    error: str | None = None
+
+
+def make_backend(scene, backend: str, **options):
+    if backend not in BACKENDS:
+        raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    try:
+        cls = get_backend(backend)
+    except ImportError as exc:
+        raise BackendUnavailable(f"backend {backend!r} is not available: {exc}") from None
+    return cls(scene, **options)
+
+
+def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,
+        reporters=(), raise_errors: bool = True, **options) -> RunResult:
+    """Run ``scene`` on ``backend``; write ``out`` (H5MD) if given; return the result.
+
+    A failure during the run (:class:`IntegrationError`) closes the output with every frame so
+    far and ``status = "failed: ..."``; it is re-raised when ``raise_errors`` is true.  Ctrl-C
+    removes the partial output and re-raises.
+    """
+    b = make_backend(scene, backend, **options)
+    model = b.model
+    reps = list(reporters)
+    mem = MemoryReporter() if keep else None
+    if mem is not None:
+        reps.append(mem)
+    if out is not None:
+        reps.append(H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats))
+    if progress:
+        reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
+                                     label=f"{scene.name} [{b.name}]"))
+    scale = scene.impulse_energy or 1.0
+    e0 = None
+    max_err = 0.0
+    status, err = "complete", None
+    try:
+        for frame in b.frames():
+            led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
+                               frame.dissipated_hysteresis)
+            if e0 is None:
+                e0 = led["total_energy"]
+                if not scene.impulse_energy:
+                    scale = max(abs(e0), 1.0)
+            max_err = max(max_err, abs(led["total_energy"] - e0) / scale)
+            for r in reps:
+                r.report(frame, led)
+    except IntegrationError as exc:
+        status, err = f"failed: {exc}", str(exc)
+    except BaseException:
+        for r in reps:
+            r.close("interrupted")
+        raise
+    for r in reps:
+        r.close(status)
+    b.stats["max_ledger_error_rel"] = max_err
+    result = RunResult(
+        trajectory=mem.trajectory(scene.to_toml(), b.name) if mem is not None else None,
+        stats=b.stats, status=status, max_ledger_error=max_err, error=err)
+    if err is not None and raise_errors:
+        raise IntegrationError(err)
+    return result
