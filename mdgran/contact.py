@@ -274,7 +274,8 @@ def law_from_contact_table(contact: dict) -> ContactLaw:
 def table_error(law: ContactLaw, n: int, delta_max: float = 10.0, kind: str = "linear") -> dict:
     """Largest interpolation error of a table of ``n`` points, measured on a 20x finer grid.
 
-    ``kind`` is ``"linear"`` (what LAMMPS-style lookup does).  Returns absolute errors of force
+    ``kind`` is ``"linear"`` (what LAMMPS-style lookup does).  The error falls as ``1/n``, not
+    ``1/n^2``: near ``delta_min`` the force goes as ``sqrt(delta - delta_min)``.  Returns absolute errors of force
     and energy, and the force error relative to the largest force in the table.
     """
     d, f, e = law.tabulate(n, delta_max)

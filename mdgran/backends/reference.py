@@ -53,6 +53,8 @@ EVENT_G_TOL = 1e-13
 EVENT_TIGHTEN = 1e-3
 #: Tighten when a snap-off is predicted within this many steps.
 NEAR_STEPS = 3.0
+#: DOP853 refuses a smaller rtol (100 machine epsilons).
+RTOL_FLOOR = 2.5e-14
 
 
 class ReferenceBackend(Backend):
@@ -67,8 +69,12 @@ class ReferenceBackend(Backend):
         self.n = m.n
         self.delta_off = m.law.delta_off
         law = m.law
-        self._singular_snap_off = (law.kind == "schwarz" and law.snap_off == "displacement"
-                                   and law.fc > -2.0)
+        if law.kind == "hertz" or law.fc == -2.0:
+            self._singular = "both"  # f - f(0) ~ delta^(3/2) at delta = 0
+        elif law.snap_off == "displacement":
+            self._singular = "approach"  # f - f_off ~ sqrt(delta - delta_min)
+        else:
+            self._singular = None  # the force maximum is a regular point of the branch
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0,
                       "wall_time_s": 0.0, "method": "DOP853 event-driven", "tolerance": self.tol}
 
@@ -103,14 +109,22 @@ class ReferenceBackend(Backend):
         return g, gdot
 
     def _near_snap_off(self, g, gd, h):
-        """True when a closed contact is predicted to reach its snap-off point within
-        ``NEAR_STEPS`` steps of size ``h`` (linear extrapolation of ``g``), and the law is
-        singular there (displacement rule of a hysteretic law: ``df/d delta`` is infinite at
-        ``delta_min``)."""
-        if not self._singular_snap_off or h is None:
+        """True when a closed contact is within ``NEAR_STEPS`` steps of size ``h`` of a
+        switching point where the force is singular (linear extrapolation of ``g``).
+
+        Schwarz with the displacement rule: ``df/d delta`` is infinite at ``delta_min``, which a
+        contact reaches only when it is about to open.  Hertz and DMT: ``f - f(0) ~
+        delta^(3/2)`` at ``delta = 0``, on both sides, so also just after closing.
+        """
+        if self._singular is None:
             return False
-        approaching = self._closed & (gd < 0.0)
-        return bool(np.any(g[approaching] < -gd[approaching] * NEAR_STEPS * h))
+        if h is None:  # first step: no step size yet, judge on the output interval
+            h = float(self.scene.data["run"]["output_interval"])
+        if self._singular == "approach":
+            near = self._closed & (gd < 0.0)
+            return bool(np.any(g[near] < -gd[near] * NEAR_STEPS * h))
+        near = self._closed
+        return bool(np.any(np.abs(g[near]) < np.abs(gd[near]) * NEAR_STEPS * h))
 
     # ---- event handling ------------------------------------------------------------------
     def _candidates(self, sol, t0, t1, g0, gd0, g1, gd1, armed_out):
@@ -215,7 +229,7 @@ class ReferenceBackend(Backend):
                 g0, gd0 = self._g(y, self._closed)
                 tight = pending is not None or self._near_snap_off(g0, gd0, h_last)
                 tl = tol * EVENT_TIGHTEN if tight else tol
-                solver = DOP853(rhs, t, y, target, rtol=tl, atol=tl,
+                solver = DOP853(rhs, t, y, target, rtol=max(tl, RTOL_FLOOR), atol=tl,
                                 first_step=min(h_last, target - t) if h_last else None)
                 accept_and_tighten = False
                 while solver.status == "running":

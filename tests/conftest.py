@@ -1,0 +1,19 @@
+import numpy as np
+import pytest
+
+from mdgran.scene import Scene, resolve
+
+
+def make_scene(**sections) -> Scene:
+    """A scene from keyword tables, e.g. make_scene(chain={"n": 2}, run={"duration": 5.0})."""
+    return Scene("test", resolve({k: dict(v) for k, v in sections.items()}))
+
+
+@pytest.fixture
+def scene_factory():
+    return make_scene
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
