@@ -103,3 +103,23 @@ def test_limits_run_and_close_ledger(name):
     keep the ledger closed."""
     res = run(load_scene(name, [("run.duration", 40.0)]), "reference")
     assert res.max_ledger_error < 1e-8
+
+
+def test_primary_pulse_speeds_match_and_nesterenko_exponent():
+    """macro-hertz's impulse is calibrated so its primary pulse runs as fast as micro-star's
+    (the paper's matching); and the Hertz pulse speed scales as v^(1/5) (Nesterenko)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "reference" / "calibrate_impulse.py"
+    spec = importlib.util.spec_from_file_location("calib", path)
+    calib = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(calib)
+    v_micro = load_scene("micro-star").data["impulse"]["velocity"]
+    v_macro = load_scene("macro-hertz").data["impulse"]["velocity"]
+    c_micro = calib.pulse_speed("micro-star", v_micro)
+    c_macro = calib.pulse_speed("macro-hertz", v_macro)
+    assert c_macro == pytest.approx(c_micro, rel=5e-3)
+    c1 = calib.pulse_speed("macro-hertz", 1.0)
+    exponent = math.log(c_macro / c1) / math.log(v_macro)
+    assert exponent == pytest.approx(0.2, abs=0.015)
