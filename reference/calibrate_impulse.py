@@ -41,15 +41,15 @@ def primary_pulse_speed(traj, v0: float, first: int = 3, last: int = 18) -> floa
 
 
 def pulse_speed(scene_name: str, v0: float) -> float:
-    sc = load_scene(scene_name, [("impulse.velocity", v0), ("run.duration", 40.0),
-                                 ("run.output_interval", 0.005)])
+    sc = load_scene(scene_name, [("impulse.velocity", v0), ("run.duration", 25.0),
+                                 ("run.output_interval", 0.01)])
     return primary_pulse_speed(run(sc, "reference").trajectory, v0)
 
 
 def main():
     v_micro = float(load_scene("micro-star").data["impulse"]["velocity"])
     c_micro = pulse_speed("micro-star", v_micro)
-    trial = [0.5, 1.0, 2.0, 4.0]
+    trial = [1.0, 2.0, 4.0, 8.0]
     speeds = [pulse_speed("macro-hertz", v) for v in trial]
     slope, icpt = np.polyfit(np.log(trial), np.log(speeds), 1)
     v_hertz = float(np.exp((np.log(c_micro) - icpt) / slope))
