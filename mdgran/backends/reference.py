@@ -220,14 +220,19 @@ class ReferenceBackend(Backend):
         target, pending = float(out_times[1]), None
         rhs = self._rhs_factory(self._closed.copy())
         switches_here = {}
+        post_event = False
         while True:
             restart = None
             if target > t:
                 self.stats["segments"] += 1
-                # the approach to an event (pending) runs at a tighter tolerance: at snap-off the
-                # force has a square-root singularity, where a step's error estimate is weakest
+                # Tighter tolerance (EVENT_TIGHTEN) for: the approach to an event (pending) and
+                # steps predicted to reach a singular switching point, where the force has a
+                # sqrt or delta^(3/2) singularity and a step's error estimate is weakest; and
+                # the steps up to the next output time after a switch (measured: micro-star to
+                # t = 60, ledger error 1.4e-9 -> 7.6e-11 of E_imp for 0.4 % more steps).
                 g0, gd0 = self._g(y, self._closed)
-                tight = pending is not None or self._near_snap_off(g0, gd0, h_last)
+                tight = pending is not None or post_event or self._near_snap_off(g0, gd0, h_last)
+                post_event = False
                 tl = tol * EVENT_TIGHTEN if tight else tol
                 solver = DOP853(rhs, t, y, target, rtol=max(tl, RTOL_FLOOR), atol=tl,
                                 first_step=min(h_last, target - t) if h_last else None)
@@ -298,6 +303,7 @@ class ReferenceBackend(Backend):
             armed_out = self._g(y, self._closed)[0] <= 0.0
             rhs = self._rhs_factory(self._closed.copy())
             target, pending = float(out_times[i_out]), None
+            post_event = True
         self.stats["wall_time_s"] = _time.perf_counter() - wall0
 
     def _frame(self, step, t, y, events):
