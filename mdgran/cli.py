@@ -1,6 +1,6 @@
-"""Command line: ``mdgran scenes | info | run`` (contract.md).
+"""Command line: ``mdgran scenes | info | run | compare`` (contract.md).
 
-Exit status: 0 success; 2 bad input (one line on stderr naming the key and what is allowed,
+Exit status: 0 success; 3 a comparison whose verdict fails; 2 bad input (one line on stderr naming the key and what is allowed,
 no traceback, no output file); 1 a failure during a run (the output file is written first,
 with every frame so far and its ``status`` attribute saying what failed).  Heavy imports are
 done inside the subcommands so that ``mdgran scenes`` starts fast.
@@ -108,6 +108,23 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    from .compare import compare
+
+    scene = _load(args)
+    backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+    if len(backends) < 2:
+        raise UsageError("--backends: give at least two, e.g. reference,lammps")
+    report = compare(scene, backends, out_dir=args.out, progress=not args.quiet)
+    n_pass = sum(c["passed"] for c in report["criteria"])
+    print(f"{scene.name}: {'PASS' if report['passed'] else 'FAIL'} ({n_pass} of "
+          f"{len(report['criteria'])} criteria); report in {args.out}/report.md")
+    for c in report["criteria"]:
+        if not c["passed"]:
+            print(f"  FAIL {c['name']}: {c['measured']:.3g} > {c['threshold']:.3g} ({c['detail']})")
+    return 0 if report["passed"] else 3
+
+
 # ---- parser ----------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="mdgran", description="Adhesive micro-granular chain simulations.")
@@ -133,6 +150,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output file (.h5)")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("compare", help="run backends side by side, write a report (exit 3 if "
+                       "any criterion fails)")
+    scene_args(s)
+    s.add_argument("--out", required=True, help="report folder")
+    s.add_argument("--backends", default="reference,lammps",
+                   help="comma-separated, the first is the reference (default reference,lammps)")
+    s.add_argument("--quiet", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_compare)
     return p
 
 

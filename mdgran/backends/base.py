@@ -56,6 +56,20 @@ class Backend:
         self.options = options
         self.stats: dict = {}
 
+    #: order of convergence in ``run.dt`` for fixed-step backends (used for error estimates)
+    order = 2
+
+    @classmethod
+    def refinement(cls, scene):
+        """Overrides for a more accurate run of the same scene, and the factor that turns the
+        difference between the two runs into an error estimate of the nominal one.
+
+        Fixed-step backends of order ``p`` halve ``run.dt``: Richardson gives
+        ``error(dt) ~ |x_dt - x_dt/2| * 2^p / (2^p - 1)``.
+        """
+        dt = float(scene.data["run"]["dt"])
+        return [("run.dt", dt / 2)], 2.0**cls.order / (2.0**cls.order - 1.0)
+
     def frames(self) -> Iterator[Frame]:  # pragma: no cover - interface
         raise NotImplementedError
 

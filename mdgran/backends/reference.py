@@ -78,6 +78,12 @@ class ReferenceBackend(Backend):
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0,
                       "wall_time_s": 0.0, "method": "DOP853 event-driven", "tolerance": self.tol}
 
+    @classmethod
+    def refinement(cls, scene):
+        """The same scene at 1/100 of the tolerance; its difference from the nominal run is
+        taken as the nominal run's error."""
+        return [("run.tolerance", max(float(scene.data["run"]["tolerance"]) / 100, 1e-14))], 1.0
+
     # ---- right-hand side and event functions ---------------------------------------------
     def _rhs_factory(self, closed):
         m = self.model

@@ -1,0 +1,203 @@
+"""Side-by-side comparison of backends on one scene, with a verdict per criterion.
+
+For each backend the scene is run twice: as given, and refined (the backend's
+:meth:`~mdgran.backends.base.Backend.refinement`: 1/100 of the tolerance for the reference,
+half the step for fixed-step backends).  The difference between the two, scaled by Richardson's
+factor, is the backend's own error estimate ``e_B(t)`` (max over beads, units of p).
+
+Predictability.  The micro chain amplifies small differences while its clusters form and
+re-form.  The reference is run once more with the impulse changed by 1e-12 (relative): the
+growth of that difference gives the amplification factor and a finite-time Lyapunov exponent.
+A backend's predictability horizon is the first time its own error estimate exceeds
+``PREDICTABLE`` (0.01 p, about 1 % of the equilibrium compression); past it, single events and
+trajectories are no longer expected to match, and only statistics are compared.
+
+Criteria (each with threshold and measured value in the report; exit status 3 when any fails):
+
+* ``trajectory``: up to the horizon, ``max_i |x_B - x_ref|(t) <= 3 (e_B(t) + e_ref(t)) + floor``.
+* ``dissipation never decreases``: for each backend, D_viscous and D_hysteresis are
+  non-decreasing (a sign error in damping or hysteresis breaks this first).
+* ``ledger``: each backend's ledger closure over the whole run, ``max |E(t) - E0| / E_imp``,
+  within the backend's bound (reference 1e-8, fixed-step backends 1e-3).
+* ``dissipation``: viscous and hysteretic dissipation at the horizon agree within 3x the sum
+  of the backends' error estimates of those quantities (plus 1e-9 E_imp).
+* ``events``: the same sequence of (contact, kind) up to the horizon.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time as _time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .simulation import run
+
+PREDICTABLE = 1e-2
+SAFETY = 3.0
+PERTURBATION = 1e-12
+LEDGER_BOUND = {"reference": 1e-8}
+LEDGER_BOUND_FIXED_STEP = 1e-3
+
+
+@dataclass
+class Criterion:
+    name: str
+    passed: bool
+    measured: float
+    threshold: float
+    detail: str = ""
+
+
+@dataclass
+class BackendRuns:
+    name: str
+    nominal: object  # Trajectory
+    refined: object
+    error: np.ndarray  # [F] own error estimate, max over beads
+    factor: float
+    wall_s: float
+    ledger_error: float
+    ledger_error_refined: float
+
+
+def bead_difference(a, b) -> np.ndarray:
+    """``max_i |x_i^a(t) - x_i^b(t)|`` at the common frame times."""
+    m = min(len(a.time), len(b.time))
+    return np.max(np.abs(a.x[:m] - b.x[:m]), axis=1)
+
+
+def _ledger_rel(tr, scale):
+    return float(np.max(np.abs(tr.ledger["total_energy"] - tr.e0)) / scale)
+
+
+def run_backend(scene, name, out_dir=None, progress=False) -> BackendRuns:
+    from .simulation import make_backend
+
+    cls = type(make_backend(scene, name))
+    overrides, factor = cls.refinement(scene)
+    t0 = _time.perf_counter()
+    out = Path(out_dir) / f"{name}.h5" if out_dir is not None else None
+    nominal = run(scene, name, out=out, progress=progress).trajectory
+    wall = _time.perf_counter() - t0
+    refined = run(scene.with_overrides(overrides), name, progress=progress).trajectory
+    scale = scene.impulse_energy or 1.0
+    return BackendRuns(name, nominal, refined, factor * bead_difference(nominal, refined),
+                       factor, wall, _ledger_rel(nominal, scale), _ledger_rel(refined, scale))
+
+
+def predictability(scene, ref: BackendRuns) -> dict:
+    """Growth of a 1e-12 impulse perturbation in the reference."""
+    v0 = float(scene.data["impulse"]["velocity"])
+    pert = run(scene.with_overrides([("impulse.velocity", v0 * (1 + PERTURBATION))]),
+               ref.name).trajectory
+    d = bead_difference(ref.nominal, pert)
+    t = ref.nominal.time[: len(d)]
+    k1 = int(np.searchsorted(t, min(1.0, t[-1])))
+    kmax = int(np.argmax(d))
+    amp = float(d[kmax] / d[k1]) if d[k1] > 0 else float("inf")
+    ftle = float(math.log(amp) / (t[kmax] - t[k1])) if kmax > k1 and amp > 0 else 0.0
+    return {"perturbation": PERTURBATION, "difference": d, "time": t,
+            "amplification": amp, "ftle": ftle, "t_max_difference": float(t[kmax])}
+
+
+def horizon(time, *errors) -> float:
+    """First time any error estimate exceeds PREDICTABLE (the run's end if never)."""
+    e = np.max(np.vstack([err[: len(time)] for err in errors]), axis=0)
+    above = np.flatnonzero(e > PREDICTABLE)
+    return float(time[above[0]]) if above.size else float(time[-1])
+
+
+def event_sequence(tr, t_max):
+    keep = tr.ev_time <= t_max
+    return tr.ev_time[keep], list(zip(tr.ev_contact[keep].tolist(), tr.ev_kind[keep].tolist()))
+
+
+def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list, dict]:
+    scale = scene.impulse_energy or 1.0
+    t = ref.nominal.time
+    th = horizon(t, ref.error, other.error)
+    k = int(np.searchsorted(t, th, side="right"))
+    crit = []
+    # trajectory
+    d = bead_difference(ref.nominal, other.nominal)
+    allowed = SAFETY * (ref.error[: len(d)] + other.error[: len(d)]) + 1e-12 * max(
+        1.0, float(np.abs(ref.nominal.x).max()))
+    ratio = d[:k] / allowed[:k]
+    worst = int(np.argmax(ratio))
+    crit.append(Criterion(f"trajectory {other.name} vs {ref.name}", bool(ratio.max() <= 1.0),
+                          float(d[worst]), float(allowed[worst]),
+                          f"worst at t = {t[worst]:.4g} (horizon {th:.4g})"))
+    # ledger closure of each backend
+    for b in (ref, other):
+        bound = LEDGER_BOUND.get(b.name, LEDGER_BOUND_FIXED_STEP)
+        crit.append(Criterion(f"ledger {b.name}", bool(b.ledger_error <= bound), b.ledger_error,
+                              bound, f"refined run: {b.ledger_error_refined:.3g}"))
+    # dissipation only grows (a damping or hysteresis sign error breaks this first)
+    for b in (ref, other):
+        worst = min(float(np.min(np.diff(b.nominal.ledger[q]))) if len(b.nominal.time) > 1
+                    else 0.0 for q in ("dissipated_viscous", "dissipated_hysteresis"))
+        crit.append(Criterion(f"dissipation never decreases ({b.name})", worst >= -1e-12 * scale,
+                              -worst / scale, 1e-12, "largest decrease of D_viscous or "
+                              "D_hysteresis between frames, relative to E_imp"))
+    # dissipation split at the horizon
+    kk = min(k, len(other.nominal.time), len(ref.nominal.time)) - 1
+    for q in ("dissipated_viscous", "dissipated_hysteresis"):
+        a, b = ref.nominal.ledger[q][kk], other.nominal.ledger[q][kk]
+        ea = ref.factor * abs(a - ref.refined.ledger[q][kk])
+        eb = other.factor * abs(b - other.refined.ledger[q][kk])
+        thr = SAFETY * (ea + eb) + 1e-9 * scale
+        crit.append(Criterion(f"{q} at horizon", bool(abs(a - b) <= thr),
+                              float(abs(a - b) / scale), float(thr / scale), f"{ref.name} {a:.6g}, {other.name} {b:.6g} "
+                              f"(units eta p; measured and threshold relative to E_imp)"))
+    # events
+    ta, sa = event_sequence(ref.nominal, th)
+    tb, sb = event_sequence(other.nominal, th)
+    m = min(len(sa), len(sb))
+    first_diff = next((i for i in range(m) if sa[i] != sb[i]), None)
+    same = first_diff is None and len(sa) == len(sb)
+    offset = float(np.max(np.abs(ta[:m] - tb[:m]))) if m else 0.0
+    crit.append(Criterion(f"events {other.name} vs {ref.name}", same,
+                          float(len(sa) - len(sb)) if first_diff is None else float(first_diff),
+                          0.0, f"{len(sa)} vs {len(sb)} events up to the horizon; "
+                          f"max time offset {offset:.3g}"
+                          + ("" if first_diff is None else f"; first difference at event "
+                             f"#{first_diff}: {sa[first_diff] if first_diff < len(sa) else None} "
+                             f"vs {sb[first_diff] if first_diff < len(sb) else None}")))
+    info = {"horizon": th, "max_event_time_offset": offset, "events_compared": m}
+    return crit, info
+
+
+def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=False) -> dict:
+    """Run ``backends`` (the first is the reference) on ``scene`` and judge them; writes
+    ``report.json``, ``report.md`` and figures into ``out_dir`` when given."""
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    runs = [run_backend(scene, b, out_dir, progress) for b in backends]
+    ref = runs[0]
+    pred = predictability(scene, ref)
+    criteria, pairs = [], {}
+    for other in runs[1:]:
+        crit, info = judge(scene, ref, other, pred)
+        criteria += crit
+        pairs[other.name] = info
+    report = {
+        "scene": scene.name,
+        "backends": list(backends),
+        "passed": all(c.passed for c in criteria),
+        "criteria": [asdict(c) for c in criteria],
+        "predictability": {k: v for k, v in pred.items() if k not in ("difference", "time")},
+        "pairs": pairs,
+        "runs": {r.name: {"wall_s": r.wall_s, "ledger_error": r.ledger_error,
+                          "ledger_error_refined": r.ledger_error_refined,
+                          "events": int(len(r.nominal.ev_time)),
+                          "max_own_error": float(r.error.max())} for r in runs},
+        "thresholds": {"predictable_p": PREDICTABLE, "safety": SAFETY},
+    }
+    if out_dir is not None:
+        from .compare_report import write_report
+
+        write_report(Path(out_dir), scene, runs, pred, report)
+    return report

@@ -1,0 +1,155 @@
+"""Writing a comparison: ``report.json``, ``report.md`` and PNG figures (see mdgran.compare)."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .compare import SAFETY
+
+
+def _atomic_write(path: Path, text: str):
+    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _figures(out: Path, scene, runs, pred, report):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scale = scene.impulse_energy or 1.0
+    styles = ["-", "--", ":", "-."]
+    # energies
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    names = {"kinetic_energy": "kinetic", "contact_energy": "contact",
+             "substrate_energy": "substrate", "dissipated_viscous": "dissipated, viscous",
+             "dissipated_hysteresis": "dissipated, hysteresis"}
+    for r, ls in zip(runs, styles):
+        for i, (key, label) in enumerate(names.items()):
+            ax.plot(r.nominal.time, r.nominal.ledger[key] / scale, ls, color=f"C{i}", lw=1.2,
+                    label=f"{label} ({r.name})")
+    ax.set(xlabel="time (1/q)", ylabel="energy / E_imp",
+           title=f"{scene.name}: energy ledger terms ({', '.join(r.name for r in runs)})")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.tight_layout()
+    fig.savefig(out / "energies.png", dpi=110)
+    plt.close(fig)
+    # ledger error
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for r, ls in zip(runs, styles):
+        e = np.abs(r.nominal.ledger["total_energy"] - r.nominal.e0) / scale
+        ax.semilogy(r.nominal.time, np.maximum(e, 1e-17), ls, label=r.name)
+    ax.set(xlabel="time (1/q)", ylabel="|E(t) - E0| / E_imp",
+           title="energy-ledger error of each backend")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "ledger_error.png", dpi=110)
+    plt.close(fig)
+    # differences
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    ref = runs[0]
+    t = ref.nominal.time
+    ax.semilogy(pred["time"], np.maximum(pred["difference"], 1e-18), color="0.6",
+                label=f"{ref.name}: impulse x (1 + 1e-12)")
+    ax.semilogy(t[: len(ref.error)], np.maximum(ref.error, 1e-18), color="C0", lw=0.8,
+                label=f"{ref.name}: own error estimate")
+    for i, r in enumerate(runs[1:], start=1):
+        d = np.max(np.abs(r.nominal.x[: len(t)] - ref.nominal.x[: len(r.nominal.time)]), axis=1)
+        tt = t[: len(d)]
+        ax.semilogy(tt, np.maximum(d, 1e-18), color=f"C{i}", lw=1.5,
+                    label=f"{r.name} - {ref.name}")
+        ax.semilogy(tt, SAFETY * (r.error[: len(d)] + ref.error[: len(d)]), ":",
+                    color=f"C{i}", label=f"allowed: {SAFETY:g} x (own errors)")
+        ax.axvline(report["pairs"][r.name]["horizon"], color=f"C{i}", ls="--", lw=0.8)
+    ax.set(xlabel="time (1/q)", ylabel="max_i |x_i - x_i'| (units of p)",
+           title="difference between backends (dashed line: predictability horizon)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "difference.png", dpi=110)
+    plt.close(fig)
+    # event timelines
+    fig, axs = plt.subplots(1, len(runs), figsize=(4 * len(runs) + 1, 4.5), sharey=True,
+                            squeeze=False)
+    for ax, r in zip(axs[0], runs):
+        tr = r.nominal
+        for kind, mk, col, lab in ((0, "v", "C3", "open (snap-off)"),
+                                   (1, "^", "C2", "close (snap-to)")):
+            sel = tr.ev_kind == kind
+            ax.plot(tr.ev_time[sel], tr.ev_contact[sel], mk, color=col, ms=4, label=lab)
+        ax.set(xlabel="time (1/q)", title=f"{r.name}: {len(tr.ev_time)} contact events")
+        ax.grid(alpha=0.3)
+    axs[0][0].set_ylabel("contact (i joins bead i-1 and i)")
+    axs[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "events.png", dpi=110)
+    plt.close(fig)
+
+
+def _markdown(scene, runs, report) -> str:
+    p = report["predictability"]
+    lines = [
+        f"# Comparison: {scene.name}",
+        "",
+        f"**Verdict: {'PASS' if report['passed'] else 'FAIL'}** "
+        f"({sum(c['passed'] for c in report['criteria'])} of {len(report['criteria'])} "
+        f"criteria pass). Backends: {', '.join(report['backends'])} (the first is the reference).",
+        "",
+        "## Criteria",
+        "",
+        "| criterion | verdict | measured | threshold | detail |",
+        "|---|---|---|---|---|",
+    ]
+    for c in report["criteria"]:
+        lines.append(f"| {c['name']} | {'pass' if c['passed'] else '**FAIL**'} | "
+                     f"{c['measured']:.3g} | {c['threshold']:.3g} | {c['detail']} |")
+    lines += [
+        "",
+        "## Predictability",
+        "",
+        f"The reference run with the impulse changed by {p['perturbation']:g} (relative) departs "
+        f"from the nominal run by a factor {p['amplification']:.3g} at most (reached at "
+        f"t = {p['t_max_difference']:.4g}); finite-time Lyapunov exponent "
+        f"{p['ftle']:.3g} per time unit. A backend pair is judged up to its horizon: the first "
+        f"time either backend's own error estimate exceeds {report['thresholds']['predictable_p']:g} p.",
+        "",
+        "| pair | horizon | events compared | max event time offset |",
+        "|---|---|---|---|",
+    ]
+    for name, info in report["pairs"].items():
+        lines.append(f"| {name} vs {report['backends'][0]} | {info['horizon']:.4g} | "
+                     f"{info['events_compared']} | {info['max_event_time_offset']:.3g} |")
+    lines += ["", "## Runs", "", "| backend | wall time (s) | ledger error / E_imp | "
+              "refined run's | events | max own error (p) |", "|---|---|---|---|---|---|"]
+    for name, r in report["runs"].items():
+        lines.append(f"| {name} | {r['wall_s']:.2f} | {r['ledger_error']:.3g} | "
+                     f"{r['ledger_error_refined']:.3g} | {r['events']} | "
+                     f"{r['max_own_error']:.3g} |")
+    lines += [
+        "",
+        "## Figures",
+        "",
+        "![energies](energies.png)",
+        "",
+        "![ledger error](ledger_error.png)",
+        "",
+        "![difference](difference.png)",
+        "",
+        "![events](events.png)",
+        "",
+        "How to read: each backend's own error estimate is the difference between its nominal "
+        "run and a refined run (1/100 of the tolerance for the reference; half the time step "
+        "for fixed-step backends, scaled by Richardson's factor). The backends agree when their "
+        f"difference stays below {SAFETY:g} times the sum of those estimates.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out: Path, scene, runs, pred, report):
+    _figures(out, scene, runs, pred, report)
+    _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
+    _atomic_write(out / "report.md", _markdown(scene, runs, report))

@@ -1,0 +1,37 @@
+"""Backends used only by the comparison tests: a correct second opinion, and broken ones."""
+from dataclasses import replace
+
+from mdgran.backends.reference import ReferenceBackend
+from mdgran.contact import ContactLaw
+
+
+class TightReference(ReferenceBackend):
+    """The reference at 1/1000 of the scene's tolerance: a correct second backend."""
+
+    name = "tight-reference"
+
+    def __init__(self, scene, **options):
+        tol = float(scene.data["run"]["tolerance"]) * 1e-3
+        super().__init__(scene, tolerance=tol, **options)
+
+
+class FlippedDamping(TightReference):
+    """Damping with the wrong sign: it pumps energy in."""
+
+    name = "flipped-damping"
+
+    def __init__(self, scene, **options):
+        super().__init__(scene, **options)
+        self.model = replace(self.model, damping=-self.model.damping)
+
+
+class WrongSnapOff(TightReference):
+    """Snap-off at the force maximum where the scene asks for the displacement rule."""
+
+    name = "wrong-snap-off"
+
+    def __init__(self, scene, **options):
+        super().__init__(scene, **options)
+        law = self.model.law
+        self.model = replace(self.model, law=ContactLaw(law.kind, law.fc, "force"))
+        self.delta_off = self.model.law.delta_off

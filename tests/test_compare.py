@@ -1,0 +1,67 @@
+"""The comparison harness: it passes a correct second backend and fails broken ones on the
+right criterion (the harness can fail)."""
+import json
+
+import pytest
+
+from mdgran.backends import BACKENDS
+from mdgran.compare import compare
+from mdgran.scene import load_scene
+
+TEST_BACKENDS = {
+    "tight-reference": "backends_for_tests:TightReference",
+    "flipped-damping": "backends_for_tests:FlippedDamping",
+    "wrong-snap-off": "backends_for_tests:WrongSnapOff",
+}
+
+
+@pytest.fixture
+def test_backends(monkeypatch):
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+    for k, v in TEST_BACKENDS.items():
+        monkeypatch.setitem(BACKENDS, k, v)
+    yield
+    sys.modules.pop("backends_for_tests", None)
+
+
+def verdicts(report):
+    return {c["name"]: c["passed"] for c in report["criteria"]}
+
+
+def test_correct_backend_passes_and_report_is_written(test_backends, tmp_path):
+    sc = load_scene("micro-star", [("run.duration", 30.0)])
+    rep = compare(sc, ("reference", "tight-reference"), out_dir=tmp_path)
+    assert rep["passed"], [c for c in rep["criteria"] if not c["passed"]]
+    for f in ("report.md", "report.json", "energies.png", "ledger_error.png", "difference.png",
+              "events.png", "reference.h5", "tight-reference.h5"):
+        assert (tmp_path / f).exists(), f
+    assert json.loads((tmp_path / "report.json").read_text())["passed"] is True
+    assert rep["predictability"]["amplification"] > 1
+
+
+def test_flipped_damping_fails_on_dissipation(test_backends):
+    sc = load_scene("micro-star", [("run.duration", 30.0)])
+    v = verdicts(compare(sc, ("reference", "flipped-damping")))
+    assert not v["dissipation never decreases (flipped-damping)"]
+    assert not v["trajectory flipped-damping vs reference"]
+    assert v["dissipation never decreases (reference)"]
+
+
+def test_wrong_snap_off_fails_on_events(test_backends):
+    sc = load_scene("micro-star", [("run.duration", 30.0)])
+    v = verdicts(compare(sc, ("reference", "wrong-snap-off")))
+    assert not v["events wrong-snap-off vs reference"]
+    assert not v["dissipated_hysteresis at horizon"]
+    assert v["dissipation never decreases (wrong-snap-off)"]  # its own books are consistent
+
+
+def test_cli_compare_exit_status(test_backends, tmp_path, capsys):
+    from mdgran.cli import main
+
+    args = ["compare", "micro-star", "--set", "run.duration=10", "--quiet", "--out"]
+    assert main(args + [str(tmp_path / "ok"), "--backends", "reference,tight-reference"]) == 0
+    assert main(args + [str(tmp_path / "bad"), "--backends", "reference,flipped-damping"]) == 3
+    assert "FAIL" in capsys.readouterr().out
