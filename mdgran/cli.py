@@ -1,4 +1,4 @@
-"""Command line: ``mdgran scenes | info | run | compare`` (contract.md).
+"""Command line: ``mdgran scenes | info | run | compare | sweep`` (contract.md).
 
 Exit status: 0 success; 3 a comparison whose verdict fails; 2 bad input (one line on stderr naming the key and what is allowed,
 no traceback, no output file); 1 a failure during a run (the output file is written first,
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 
@@ -95,7 +96,8 @@ def cmd_run(args) -> int:
     scene = _load(args)
     try:
         res = run(scene, args.backend, out=args.out, progress=not args.quiet, keep=False,
-                  raise_errors=False)
+                  raise_errors=False, resume=args.resume,
+                  checkpoint_every=args.checkpoint if args.checkpoint > 0 else None)
     except IntegrationError as exc:  # pragma: no cover - run() reports via status
         return _fail(str(exc), 1)
     if res.error is not None:
@@ -125,6 +127,22 @@ def cmd_compare(args) -> int:
     return 0 if report["passed"] else 3
 
 
+def cmd_sweep(args) -> int:
+    from .scene import parse_override
+    from .sweep import run_sweep
+
+    if args.workers < 1:
+        raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
+    overrides = [parse_override(s) for s in (args.set or [])]
+    res = run_sweep(args.sweep, args.out, workers=args.workers, executor=args.executor,
+                    overrides=overrides, progress=not args.quiet, small=args.small)
+    failed = [r for r in res if r["status"] != "complete"]
+    print(f"{args.sweep}: {len(res) - len(failed)} of {len(res)} cases complete in {args.out}")
+    for r in failed:
+        print(f"  case {r['index']:04d} {r['params']}: {r['status']}")
+    return 1 if failed else 0
+
+
 # ---- parser ----------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="mdgran", description="Adhesive micro-granular chain simulations.")
@@ -149,6 +167,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--backend", default="reference", help="reference | lammps | fast")
     s.add_argument("--out", required=True, help="output file (.h5)")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
+                   help="checkpoint every SECONDS of wall time into OUT.partial (0: off; "
+                        "default 60); a killed run resumes with --resume")
+    s.add_argument("--resume", action="store_true",
+                   help="continue from OUT.partial's last checkpoint if there is one")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("compare", help="run backends side by side, write a report (exit 3 if "
@@ -159,6 +182,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated, the first is the reference (default reference,lammps)")
     s.add_argument("--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=cmd_compare)
+
+    s = sub.add_parser("sweep", help="parametric study, parallel and resumable")
+    s.add_argument("sweep", help="built-in sweep name or path to a sweep TOML file")
+    s.add_argument("--out", required=True, help="results folder (resumes what is there)")
+    s.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="parallel processes (default: all cores)")
+    s.add_argument("--executor", default="process", help="process (default) | mpi")
+    s.add_argument("--small", action="store_true", help="the sweep's small (CI) version")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene key in every case")
+    s.add_argument("--quiet", action="store_true", help="no progress lines")
+    s.set_defaults(func=cmd_sweep)
     return p
 
 

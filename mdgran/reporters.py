@@ -8,7 +8,7 @@ The driver (:func:`mdgran.simulation.run`) hands every frame and its ledger to e
   file beside the target (``NAME.h5.tmp-PID``), renamed onto the requested name only when the
   run completes or fails (a failed run's file holds every frame so far and says so in
   ``/parameters`` attribute ``status``).  An interrupted or killed run leaves nothing under the
-  requested name.
+  requested name; with checkpoints on, it leaves ``NAME.h5.partial`` to resume from.
 * :class:`MemoryReporter` collects a :class:`~mdgran.trajectory.Trajectory`.
 * :class:`ProgressReporter` draws a progress bar on stderr for runs longer than ~2 s.
 """
@@ -79,21 +79,84 @@ class H5MDWriter:
     """Writes the contract's H5MD 1.1 layout, frame by frame, atomically."""
 
     def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
-                 stats_source=None):
+                 stats_source=None, checkpoint_every: float | None = None, state_source=None,
+                 resume: bool = False):
+        """``checkpoint_every`` (seconds of wall time) makes the run resumable: the file is
+        filled under the fixed name ``NAME.h5.partial`` with a ``/checkpoint`` group (the
+        backend's ``state_source()`` at the last written frame), which an interrupted or
+        killed run leaves behind; ``resume=True`` opens it, drops the frames written after the
+        checkpoint, and exposes the state as ``resume_state``."""
         import h5py
 
         self.path = Path(path)
-        self.tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
+        self.checkpoint_every = checkpoint_every
+        self.state_source = state_source
+        if checkpoint_every is not None:
+            self.tmp = self.path.with_name(f"{self.path.name}.partial")
+        else:
+            self.tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
         self.scene = scene
         self.model_n = int(scene.data["chain"]["n"])
         self.positions = scene.data["output"]["positions"] if positions is None else positions
         self.stats_source = stats_source
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.f = h5py.File(self.tmp, "w")
         self._buf = []
         self._events = []
         self._frames = 0
-        self._init_file(backend_name)
+        self._last_step = None
+        self._last_checkpoint = _time.perf_counter()
+        self.resume_state = None
+        self.resume_e0 = None
+        self.resume_max_error = 0.0
+        if resume and self.tmp.exists() and self._has_checkpoint():
+            self.f = h5py.File(self.tmp, "r+")
+            self._open_existing()
+        else:
+            self.f = h5py.File(self.tmp, "w")
+            self._init_file(backend_name)
+
+    def _has_checkpoint(self) -> bool:
+        import h5py
+
+        try:
+            with h5py.File(self.tmp, "r") as f:
+                return "checkpoint" in f
+        except OSError:  # killed before the file was complete: nothing to resume
+            return False
+
+    def _open_existing(self):
+        f = self.f
+        if f["parameters"].attrs["scene"] != self.scene.to_toml():
+            f.close()
+            raise ValueError(f"{self.tmp} holds a run of another scene; delete it or use "
+                             "another --out")
+        cp = f["checkpoint"]
+        meta = json.loads(cp.attrs["meta"])
+        state = {k: meta[k] for k in ("t", "d_hyst", "h_last", "post_event", "i_out")}
+        for k in ("y", "closed", "armed_out"):
+            state[k] = cp[k][()]
+        self.resume_state = state
+        self._frames = int(meta["frames"])
+        chain, obs = f["particles/chain"], f["observables"]
+        self._series = {name: {k: chain[f"{name}/{k}"] for k in ("step", "time", "value")}
+                        for name in ("displacement", "velocity", "position") if name in chain}
+        self.positions = "position" in chain
+        for name in LEDGER_NAMES:
+            self._series[name] = {k: obs[f"{name}/{k}"] for k in ("step", "time", "value")}
+        for series in self._series.values():
+            for ds in series.values():
+                ds.resize(self._frames, axis=0)
+        self._ev = {k: f[f"events/{k}"] for k in ("time", "contact", "kind")}
+        for ds in self._ev.values():
+            ds.resize(int(meta["events"]), axis=0)
+        tot = self._series["total_energy"]["value"][()]
+        self.resume_e0 = float(tot[0])
+        self.resume_max_error = float(np.max(np.abs(tot - tot[0]))) if len(tot) else 0.0
+        if self.positions:
+            sc = self.scene.scales
+            self._pos_scale, self._t_scale = (sc.p * 1e9, sc.time * 1e12) if sc else (1.0, 1.0)
+            spacing = sc.diameter * 1e9 if sc else 1.0
+            self._rest = spacing * np.arange(1, self.model_n + 1)
 
     # ---- layout ----------------------------------------------------------------------------
     def _init_file(self, backend_name):
@@ -158,8 +221,29 @@ class H5MDWriter:
     def report(self, frame, ledger):
         self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger))
         self._events.extend(frame.events)
+        self._last_step = frame.step
         if len(self._buf) >= H5MD_BLOCK:
             self._flush()
+        if (self.checkpoint_every is not None
+                and _time.perf_counter() - self._last_checkpoint >= self.checkpoint_every):
+            self.checkpoint()
+
+    def checkpoint(self):
+        """Flush every frame and store the backend's state at the last one."""
+        state = self.state_source() if self.state_source is not None else None
+        if state is None or self._last_step is None or state["i_out"] != self._last_step:
+            return
+        self._flush()
+        if "checkpoint" in self.f:
+            del self.f["checkpoint"]
+        cp = self.f.create_group("checkpoint")
+        for k in ("y", "closed", "armed_out"):
+            cp.create_dataset(k, data=state[k])
+        meta = {k: state[k] for k in ("t", "d_hyst", "h_last", "post_event", "i_out")}
+        meta.update(frames=self._frames, events=int(self._ev["time"].shape[0]))
+        cp.attrs["meta"] = json.dumps(meta)
+        self.f.flush()
+        self._last_checkpoint = _time.perf_counter()
 
     def _append(self, series, steps, times, values):
         k0 = series["step"].shape[0]
@@ -201,10 +285,16 @@ class H5MDWriter:
             return
         try:
             if status == "interrupted":
-                self.f.close()
-                self.tmp.unlink(missing_ok=True)
+                if self.checkpoint_every is not None:  # keep NAME.partial to resume from
+                    self.checkpoint()
+                    self.f.close()
+                else:
+                    self.f.close()
+                    self.tmp.unlink(missing_ok=True)
                 return
             self._flush()
+            if "checkpoint" in self.f:
+                del self.f["checkpoint"]
             par = self.f["parameters"]
             par.attrs["status"] = status
             if self.stats_source is not None:

@@ -42,12 +42,15 @@ def make_backend(scene, backend: str, **options):
 
 
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,
-        reporters=(), raise_errors: bool = True, **options) -> RunResult:
+        reporters=(), raise_errors: bool = True, checkpoint_every: float | None = None,
+        resume: bool = False, **options) -> RunResult:
     """Run ``scene`` on ``backend``; write ``out`` (H5MD) if given; return the result.
 
     A failure during the run (:class:`IntegrationError`) closes the output with every frame so
     far and ``status = "failed: ..."``; it is re-raised when ``raise_errors`` is true.  Ctrl-C
-    removes the partial output and re-raises.
+    removes the partial output and re-raises, unless ``checkpoint_every`` (seconds) is set:
+    then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
+    in-memory trajectory then holds only the resumed frames; the file holds all).
     """
     b = make_backend(scene, backend, **options)
     model = b.model
@@ -55,17 +58,25 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     mem = MemoryReporter() if keep else None
     if mem is not None:
         reps.append(mem)
+    writer = None
     if out is not None:
-        reps.append(H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats))
+        try:
+            writer = H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats,
+                                checkpoint_every=checkpoint_every,
+                                state_source=b.checkpoint_state, resume=resume)
+        except ValueError as exc:
+            raise SceneError("--resume", str(exc)) from None
+        reps.append(writer)
+    start = writer.resume_state if writer is not None else None
     if progress:
         reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
                                      label=f"{scene.name} [{b.name}]"))
     scale = scene.impulse_energy or 1.0
-    e0 = None
-    max_err = 0.0
+    e0 = writer.resume_e0 if start is not None else None
+    max_err = writer.resume_max_error / scale if start is not None else 0.0
     status, err = "complete", None
     try:
-        for frame in b.frames():
+        for frame in (b.frames(resume=start) if start is not None else b.frames()):
             led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
                                frame.dissipated_hysteresis)
             if e0 is None:

@@ -70,8 +70,14 @@ class Backend:
         dt = float(scene.data["run"]["dt"])
         return [("run.dt", dt / 2)], 2.0**cls.order / (2.0**cls.order - 1.0)
 
-    def frames(self) -> Iterator[Frame]:  # pragma: no cover - interface
+    def frames(self, resume: dict | None = None) -> Iterator[Frame]:  # pragma: no cover
+        """Yield frames from t = 0, or from just after a checkpoint (``resume``)."""
         raise NotImplementedError
+
+    def checkpoint_state(self) -> dict | None:
+        """The state to continue from the last yielded frame, or None if the backend cannot
+        checkpoint (then runs are not resumable)."""
+        return None
 
     def output_times(self) -> np.ndarray:
         run = self.scene.data["run"]

@@ -195,7 +195,12 @@ class ReferenceBackend(Backend):
             self._switch(t, y, ks, events)
 
     # ---- main loop -----------------------------------------------------------------------
-    def frames(self):
+    def checkpoint_state(self) -> dict:
+        """Everything needed to continue exactly from the last yielded frame (the solver
+        restarts at every output time, so this is the whole hidden state)."""
+        return dict(self._snapshot)
+
+    def frames(self, resume: dict | None = None):
         """Integrate the scene; yield a Frame at every output time.
 
         The loop runs DOP853 from ``(t, y)`` towards ``target``: the next output time, so that
@@ -208,25 +213,35 @@ class ReferenceBackend(Backend):
         (``g <= EVENT_G_TOL``); if they fall short, the target moves on by ``g / |g'|``.
         """
         m, n, tol = self.model, self.n, self.tol
-        imp = self.scene.data["impulse"]
-        x, v, closed = m.initial_state(int(imp["bead"]), float(imp["velocity"]))
-        self._closed = closed
-        self._d_hyst = 0.0
-        y = np.concatenate([x, v, [0.0]])
-        t = 0.0
         out_times = self.output_times()
         events: list = []
         wall0 = _time.perf_counter()
-        self._settle(t, y, events)
-        yield self._frame(0, 0.0, y, events)
-        events = []
-        i_out = 1
-        h_last = None
-        armed_out = self._g(y, self._closed)[0] <= 0.0
-        target, pending = float(out_times[1]), None
+        if resume is None:
+            imp = self.scene.data["impulse"]
+            x, v, closed = m.initial_state(int(imp["bead"]), float(imp["velocity"]))
+            self._closed = closed
+            self._d_hyst = 0.0
+            y = np.concatenate([x, v, [0.0]])
+            t = 0.0
+            self._settle(t, y, events)
+            h_last, post_event, i_out = None, False, 0
+            armed_out = self._g(y, self._closed)[0] <= 0.0
+            self._snapshot = self._snap(t, y, h_last, armed_out, post_event, i_out)
+            yield self._frame(0, 0.0, y, events)
+            events = []
+        else:
+            t, y = float(resume["t"]), np.array(resume["y"], dtype=float)
+            self._closed = np.array(resume["closed"], dtype=bool)
+            self._d_hyst = float(resume["d_hyst"])
+            h_last = None if resume["h_last"] is None else float(resume["h_last"])
+            armed_out = np.array(resume["armed_out"], dtype=bool)
+            post_event, i_out = bool(resume["post_event"]), int(resume["i_out"])
+        i_out += 1
+        if i_out >= len(out_times):
+            return
+        target, pending = float(out_times[i_out]), None
         rhs = self._rhs_factory(self._closed.copy())
         switches_here = {}
-        post_event = False
         while True:
             restart = None
             if target > t:
@@ -278,11 +293,10 @@ class ReferenceBackend(Backend):
                     if accept_and_tighten:
                         continue
             if restart is not None:
-                t, y, target, new = restart
-                pending = new if pending is None or target < t else pending | new
-                pending = new
+                t, y, target, pending = restart
                 continue
             if pending is None:  # reached an output time: the frame is the solver's own state
+                self._snapshot = self._snap(t, y, h_last, armed_out, post_event, i_out)
                 yield self._frame(i_out, out_times[i_out], y, events)
                 events = []
                 i_out += 1
@@ -311,6 +325,11 @@ class ReferenceBackend(Backend):
             target, pending = float(out_times[i_out]), None
             post_event = True
         self.stats["wall_time_s"] = _time.perf_counter() - wall0
+
+    def _snap(self, t, y, h_last, armed_out, post_event, i_out) -> dict:
+        return {"t": float(t), "y": np.array(y), "closed": self._closed.copy(),
+                "d_hyst": self._d_hyst, "h_last": h_last, "armed_out": np.array(armed_out),
+                "post_event": bool(post_event), "i_out": int(i_out)}
 
     def _frame(self, step, t, y, events):
         n = self.n
