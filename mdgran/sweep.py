@@ -159,6 +159,8 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     sweep = load_sweep(spec, overrides, small)
     out = Path(out_dir)
     (out / "cases").mkdir(parents=True, exist_ok=True)
+    for stale in (out / "cases").glob("*.tmp-*"):  # left by a killed sweep (one sweep per DIR)
+        stale.unlink()
     _atomic_json(out / "sweep.json", {k: v for k, v in sweep.items() if k != "small"})
     todo = pending_cases(sweep, out)
     total, done0 = len(sweep["cases"]), len(sweep["cases"]) - len(todo)
