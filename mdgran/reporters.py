@@ -197,6 +197,12 @@ class H5MDWriter:
             else:
                 spacing, self._pos_scale, self._t_scale = 1.0, 1.0, 1.0
             self._rest = spacing * np.arange(1, n + 1)
+            # the standard H5MD view for generic readers (MDAnalysis opens the first particle
+            # group and reads its "velocity" as 3-vectors, which chain/velocity is not):
+            # hard links, not copies
+            beads = f.create_group("particles/beads")
+            beads["box"] = box
+            beads["position"] = chain["position"]
         obs = f.create_group("observables")
         for name in LEDGER_NAMES:
             self._series[name] = self._make_series(obs, name, ())

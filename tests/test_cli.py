@@ -150,3 +150,28 @@ def test_failed_run_keeps_frames(tmp_path, capsys, monkeypatch):
     with h5py.File(out) as f:
         assert f["parameters"].attrs["status"].startswith("failed")
         assert f["particles/chain/displacement/time"][-1] == pytest.approx(2.9)
+
+
+def test_standard_h5md_view_for_generic_readers(tmp_path):
+    """/particles/beads links (does not copy) the 3-D position element and the box, so that
+    readers that open the first particle group (MDAnalysis) see a standard H5MD group."""
+    out = tmp_path / "r.h5"
+    assert main(["run", "micro-star", "--out", str(out), "--set", "run.duration=2",
+                 "--quiet"]) == 0
+    with h5py.File(out) as f:
+        assert list(f["particles"])[0] == "beads"
+        assert f["particles/beads/position"] == f["particles/chain/position"]
+        assert f["particles/beads/position/value"].attrs["unit"] == "nm"
+        assert f["particles/beads/position/time"].attrs["unit"] == "ps"
+        x = f["particles/chain/displacement/value"][-1]
+        pos = f["particles/beads/position/value"][-1]
+        d_nm = 2.5e-6 * 1e9
+        p_nm = 1.614280483045183e-10 * 1e9
+        np.testing.assert_allclose(pos[:, 0], d_nm * np.arange(1, 21) + x * p_nm, rtol=1e-12)
+    try:
+        from MDAnalysis.coordinates.H5MD import H5MDReader
+    except ImportError:
+        return
+    r = H5MDReader(str(out))
+    assert r.n_atoms == 20
+    np.testing.assert_allclose(r.ts.positions[:, 0], 10 * d_nm * np.arange(1, 21), rtol=1e-6)
