@@ -94,8 +94,10 @@ def cmd_run(args) -> int:
     from .simulation import run
 
     scene = _load(args)
+    small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
     try:
-        res = run(scene, args.backend, out=args.out, progress=not args.quiet, keep=False,
+        res = run(scene, args.backend, out=args.out, progress=not args.quiet,
+                  keep=small and not args.quiet,
                   raise_errors=False, resume=args.resume,
                   checkpoint_every=args.checkpoint if args.checkpoint > 0 else None)
     except IntegrationError as exc:  # pragma: no cover - run() reports via status
@@ -107,6 +109,11 @@ def cmd_run(args) -> int:
         print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
               f"{st.get('events', '?')} events, wall {st.get('wall_time_s', float('nan')):.2f} s, "
               f"ledger error {res.max_ledger_error:.2e} of E_imp")
+        if res.trajectory is not None:
+            from .budget import format_budget, term_budget
+
+            print("term budget (which force terms this scene needs):")
+            print(format_budget(term_budget(res.trajectory, scene)))
     return 0
 
 

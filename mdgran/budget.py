@@ -1,0 +1,93 @@
+"""Term budget: how much each force term of Eq. 6 mattered in a run.
+
+For each term (contact law, unilateral damping, linear substrate ``k1 x``, cubic substrate
+``k3 x^3``): the largest force it exerted on any bead at any stored frame (units of eta), that
+force relative to the largest of all terms, and its largest energy (units of eta p) relative to
+the impulse energy: stored energy for conservative terms, the dissipated total for damping.
+
+A term the scene switches off is reported as ``off``; for the cubic substrate of a scene with a
+``[material]``, the budget also gives what the paper's wire (Table II: L_s = 2.5 d, d_s = 0.4 d,
+E_s = 400 GPa) *would* have contributed, which is how the paper's neglect of it is checked.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .chain import model_from_scene
+
+
+def contact_states(traj, n_contacts: int, numbers) -> np.ndarray:
+    """[F, n_contacts] bool: every contact closed at t = 0, then the events replayed; a frame
+    at time t includes the events at times <= t."""
+    index = {int(c): k for k, c in enumerate(numbers)}
+    states = np.empty((len(traj.time), n_contacts), dtype=bool)
+    cur = np.ones(n_contacts, dtype=bool)
+    j = 0
+    for f, t in enumerate(traj.time):
+        while j < len(traj.ev_time) and traj.ev_time[j] <= t:
+            cur[index[int(traj.ev_contact[j])]] = bool(traj.ev_kind[j])
+            j += 1
+        states[f] = cur
+    return states
+
+
+def paper_wire_k3(scene) -> float | None:
+    """Nondimensional cubic coefficient of the paper's wire for this scene's K1 (None without a
+    material)."""
+    sc = scene.scales
+    if sc is None:
+        return None
+    from .units import wire_cubic, wire_tension
+
+    d = sc.diameter
+    k1_si = float(scene.data["substrate"]["k1"]) * sc.stiffness
+    length = 2.5 * d
+    k3_si = wire_cubic(400e9, 0.4 * d, wire_tension(k1_si, length), length)
+    return k3_si * sc.p**2 / sc.stiffness
+
+
+def term_budget(traj, scene) -> dict:
+    m = model_from_scene(scene)
+    e_imp = scene.impulse_energy or 1.0
+    closed = contact_states(traj, m.n_contacts, m.contact_numbers)
+    x, v = traj.x, traj.v
+    f_law = np.zeros(len(traj.time))
+    f_damp = np.zeros(len(traj.time))
+    for k in range(len(traj.time)):
+        delta = m.compressions(x[k])
+        fl = np.where(closed[k], m.law.force(delta), 0.0)
+        f_law[k] = np.abs(m._apply(fl)).max()
+        if m.damping:
+            fd = np.where(closed[k], m.damping * m.differences(v[k]), 0.0)
+            f_damp[k] = np.abs(m._apply(fd)).max()
+    xmax = np.abs(x).max()
+    k3 = m.k3 if m.k3 else paper_wire_k3(scene)
+    terms = {
+        "contact": {"on": True, "max_force": float(f_law.max()),
+                    "max_energy": float(np.abs(traj.ledger["contact_energy"]).max())},
+        "damping": {"on": bool(m.damping), "max_force": float(f_damp.max()),
+                    "max_energy": float(traj.ledger["dissipated_viscous"][-1])},
+        "substrate_linear": {"on": bool(m.k1), "max_force": float(m.k1 * xmax),
+                             "max_energy": float(0.5 * m.k1 * np.max(np.sum(x * x, axis=1)))},
+        "substrate_cubic": {"on": bool(m.k3), "k3": k3,
+                            "max_force": float((k3 or 0.0) * xmax**3),
+                            "max_energy": float(0.25 * (k3 or 0.0)
+                                                * np.max(np.sum(x**4, axis=1)))},
+    }
+    if not m.k3:
+        terms["substrate_cubic"]["note"] = ("off; values are what the paper's wire would add"
+                                            if k3 else "off")
+    biggest = max(t["max_force"] for t in terms.values() if t["on"]) or 1.0
+    for t in terms.values():
+        t["force_share"] = t["max_force"] / biggest
+        t["energy_share"] = t["max_energy"] / e_imp
+    return terms
+
+
+def format_budget(terms: dict) -> str:
+    lines = [f"{'term':<18}{'on':<5}{'max force (eta)':>16}{'share':>10}{'energy/E_imp':>14}"]
+    for name, t in terms.items():
+        lines.append(f"{name:<18}{'yes' if t['on'] else 'off':<5}{t['max_force']:>16.4g}"
+                     f"{t['force_share']:>10.3g}{t['energy_share']:>14.3g}"
+                     + (f"   ({t['note']})" if t.get("note") else ""))
+    return "\n".join(lines)
