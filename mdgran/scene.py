@@ -271,10 +271,11 @@ def load_scene(spec: str, overrides=()) -> Scene:
         raise SceneError("SCENE", f"{path} is not valid TOML: {exc}") from None
     for key, value in overrides:
         _set_key(raw, key, value)
-        # an override of one way of giving the law replaces the other
-        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key)
-        if other:
-            raw["contact"].pop(other, None)
+        # an override of one way of giving a value replaces the other way in the file
+        sec, name = key.split(".")
+        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
+            name[:-3] if name.endswith("_si") else f"{name}_si")
+        raw.get(sec, {}).pop(other, None)
     return Scene(name, resolve(raw))
 
 
