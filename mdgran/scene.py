@@ -272,9 +272,9 @@ def load_scene(spec: str, overrides=()) -> Scene:
     for key, value in overrides:
         _set_key(raw, key, value)
         # an override of one way of giving a value replaces the other way in the file
-        sec, name = key.split(".")
+        sec, field_name = key.split(".")
         other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
-            name[:-3] if name.endswith("_si") else f"{name}_si")
+            field_name[:-3] if field_name.endswith("_si") else f"{field_name}_si")
         raw.get(sec, {}).pop(other, None)
     return Scene(name, resolve(raw))
 

@@ -175,3 +175,10 @@ def test_standard_h5md_view_for_generic_readers(tmp_path):
     r = H5MDReader(str(out))
     assert r.n_atoms == 20
     np.testing.assert_allclose(r.ts.positions[:, 0], 10 * d_nm * np.arange(1, 21), rtol=1e-6)
+
+
+def test_override_replaces_si_key_and_keeps_scene_name(capsys):
+    assert main(["info", "micro-star", "--json", "--set", "substrate.k1=0.005"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["scene"] == "micro-star" and info["k1"] == 0.005
+    assert info["k1_N_per_m"] == pytest.approx(0.005 * 1775.84, rel=1e-4)
