@@ -286,3 +286,62 @@ def table_error(law: ContactLaw, n: int, delta_max: float = 10.0, kind: str = "l
     ee = np.max(np.abs(e_int - law.energy(dd)))
     return {"points": n, "force_abs": float(ef), "energy_abs": float(ee),
             "force_rel": float(ef / np.max(np.abs(f)))}
+
+
+class ContactTable:
+    """The attached branch tabulated for backends that need a table (the LAMMPS hook).
+
+    Nodes are uniform in ``w = sqrt(delta - delta_min)`` (``delta_min = 0`` for Hertz), in which
+    the force is a smooth function (``t(w)`` is analytic at the snap-off point, and
+    ``delta^(3/2) = w^3`` for Hertz and DMT), so linear interpolation in ``w`` is second order
+    everywhere, where interpolation in ``delta`` is first order near snap-off.  Compressions
+    above ``delta_max`` are outside the table (:meth:`force` flags them).
+    """
+
+    def __init__(self, law: ContactLaw, n: int = 16001, delta_max: float = 100.0):
+        self.law = law
+        self.n = n
+        self.delta_max = float(delta_max)
+        self.base = law.delta_min if law.kind == "schwarz" else 0.0
+        self.w_max = math.sqrt(self.delta_max - self.base)
+        self.w = np.linspace(0.0, self.w_max, n)
+        self.delta = self.base + self.w**2
+        self.f = law.force(self.delta)
+        self.e = law.energy(self.delta)
+        self._scale = (n - 1) / self.w_max
+
+    def _locate(self, delta):
+        w = np.sqrt(np.maximum(np.asarray(delta, dtype=float) - self.base, 0.0))
+        s = np.minimum(w * self._scale, self.n - 1 - 1e-9)
+        i = s.astype(np.int64)
+        return i, s - i
+
+    def force(self, delta):
+        i, u = self._locate(delta)
+        return self.f[i] + u * (self.f[i + 1] - self.f[i])
+
+    def energy(self, delta):
+        i, u = self._locate(delta)
+        return self.e[i] + u * (self.e[i + 1] - self.e[i])
+
+    def error(self) -> dict:
+        """Largest interpolation errors against the exact law, on 17 points per interval."""
+        u = np.linspace(0.0, 1.0, 17)[1:-1]
+        w = (self.w[:-1, None] + u[None, :] * (self.w[1] - self.w[0])).ravel()
+        d = self.base + w**2
+        ef = np.max(np.abs(self.force(d) - self.law.force(d)))
+        ee = np.max(np.abs(self.energy(d) - self.law.energy(d)))
+        return {"points": self.n, "delta_max": self.delta_max, "force_abs": float(ef),
+                "energy_abs": float(ee)}
+
+    def write_lammps(self, path, keyword: str = "MDGRAN_CONTACT"):
+        """The table in LAMMPS's tabulated-potential layout (index, delta, energy, force), keyed
+        by compression delta (not a distance), for a LAMMPS user to inspect or plot."""
+        with open(path, "w") as fh:
+            fh.write(f"# mdgran contact law {self.law.kind} fc = {self.law.fc} snap_off = "
+                     f"{self.law.snap_off}; units eta (force), p (delta), eta p (energy).\n"
+                     f"# columns: index, compression delta, energy V(delta), force f(delta);\n"
+                     f"# nodes uniform in sqrt(delta - {self.base!r}); interpolation error "
+                     f"{self.error()}\n\n{keyword}\nN {self.n}\n\n")
+            for k in range(self.n):
+                fh.write(f"{k + 1} {self.delta[k]:.17g} {self.e[k]:.17g} {self.f[k]:.17g}\n")

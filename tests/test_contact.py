@@ -94,3 +94,15 @@ def test_table_error_shrinks_with_size():
     e1, e2 = table_error(law, 500)["force_abs"], table_error(law, 1000)["force_abs"]
     assert 1.8 < e1 / e2 < 2.2
     assert table_error(law, 2001)["force_rel"] < 1e-5
+
+
+@pytest.mark.parametrize("law", [ContactLaw("schwarz", fc_from_lambda(0.64)),
+                                 ContactLaw("schwarz", -2.0), ContactLaw("hertz")])
+def test_sqrt_table_is_second_order_through_snap_off(law):
+    from mdgran.contact import ContactTable
+
+    e1, e2 = ContactTable(law, 2001).error(), ContactTable(law, 8001).error()
+    assert 14 < e1["force_abs"] / e2["force_abs"] < 18  # (8001-1)/(2001-1) = 4 -> 16
+    t = ContactTable(law)
+    d = law.delta_off + np.array([1e-12, 1e-6, 1e-3, 0.5, 3.0])
+    np.testing.assert_allclose(t.force(d), law.force(d), atol=2e-8)
