@@ -1,0 +1,266 @@
+"""The LAMMPS backend: the same scenes run in LAMMPS (``lammps_inputs/chain.in``).
+
+LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the linear substrate is a
+``fix spring/self`` tether; the contact (law, hysteresis, unilateral damping, and the cubic
+substrate term when the scene has one) is a Python callback of ``fix external pf/callback``:
+
+* **Contacts by tag.**  Contact ``k`` joins atoms with tags ``k`` and ``k + 1``.  Positions and
+  velocities of every atom the rank sees (owned and ghost) are scattered into arrays indexed by
+  tag, so LAMMPS's re-sorting and migration of atoms do not matter.  Each contact's open/closed
+  state is kept per contact, on every rank, for the whole chain: the ghost cut-off spans the
+  chain's box (see ``ghostcut``), so every rank updates every contact from identical positions,
+  and the states agree across ranks by construction.
+* **Hysteresis, step-quantized.**  At each step a closed contact with ``delta <= delta_off``
+  opens (its energy ``V(delta)`` goes to ``D_hysteresis``) and an open one with ``delta >= 0``
+  closes (strict inequalities where ``delta_off = 0``, DMT and Hertz, so a contact resting at
+  ``delta = 0`` does not flip).  The event time is recorded by linear interpolation of
+  ``delta`` within the step; the dynamics switch at the step.  This quantization makes the
+  method first order in ``dt`` through events (see docs/lammps.md).
+* **Half-step velocities.**  ``post_force`` sees ``v(t + dt/2)``; the damping force uses
+  ``v(t + dt) ~ v(t + dt/2) + dt/2 a(t)`` (``a`` from the previous step), which keeps the
+  damping term second order.  At step 0 the velocities are the initial (full-step) ones.
+* The callback writes every component of the force array (LAMMPS does not zero it), and
+  recomputes without advancing any state when called twice for the same step (the set-up
+  call of a ``run``).  The contact energy is handed to LAMMPS with
+  ``fix_external_set_energy_global``, so ``thermo`` shows it (``f_contact``).
+* **Force evaluation** from :class:`mdgran.contact.ContactTable` (16001 nodes uniform in
+  ``sqrt(delta - delta_min)``, second order; 3e-6 absolute error at ``delta = 100``), written
+  as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
+  inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from ..contact import ContactTable
+from ..lammps_env import LammpsUnavailable, new_lammps
+from ..scene import SceneError
+from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+
+INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
+
+
+def input_file() -> Path:
+    """``lammps_inputs/chain.in`` of the checkout, or the copy installed with the package."""
+    if INPUT.exists():
+        return INPUT
+    return Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
+
+
+class LammpsBackend(Backend):
+    """Velocity Verlet in LAMMPS at ``run.dt`` with the contact as a Python hook."""
+
+    name = "lammps"
+    order = 2  # away from events; step-quantized snap events make it first order overall
+
+    def __init__(self, scene, comm=None, contact_eval="table", table_points=16001,
+                 table_file=None, **options):
+        super().__init__(scene, **options)
+        run = scene.data["run"]
+        self.dt = float(options.get("dt", run["dt"]))
+        interval = float(run["output_interval"])
+        self.steps_per_frame = int(round(interval / self.dt))
+        if abs(self.steps_per_frame * self.dt - interval) > 1e-9 * interval:
+            raise SceneError("run.dt", f"must divide run.output_interval = {interval} "
+                             f"(dt = {self.dt})")
+        self.comm = comm
+        m = self.model
+        self.law = m.law
+        self.table = ContactTable(m.law, table_points) if contact_eval == "table" else None
+        self.table_file = table_file
+        self.walls = m.walls
+        self.n = m.n
+        self.ntot = m.n + 2 if m.walls else m.n
+        self.stats = {"method": "LAMMPS velocity Verlet + Python contact hook",
+                      "dt": self.dt, "steps": 0, "events": 0, "contact_eval": contact_eval,
+                      "wall_time_s": 0.0, "callback_s": 0.0}
+        if self.table is not None:
+            self.stats["table"] = self.table.error()
+        strict = self.law.delta_off == 0.0
+        self._open_if = (lambda d: d < 0.0) if strict else (lambda d: d <= self.law.delta_off)
+        self._close_if = (lambda d: d > 0.0) if strict else (lambda d: d >= 0.0)
+
+    # ---- set-up ------------------------------------------------------------------------
+    def _start(self):
+        try:
+            lmp = new_lammps(comm=self.comm)
+        except LammpsUnavailable as exc:
+            raise IntegrationError(str(exc)) from None
+        d = self.scene.data
+        bead = int(d["impulse"]["bead"])
+        struck = bead + 1 if self.walls else bead
+        spacing = 1.0 / self.ntot
+        delta_max = self.table.delta_max if self.table is not None else 100.0
+        ghost = 2.0 * delta_max + 2.0
+        variables = {"ntot": self.ntot, "spacing": repr(spacing), "walls": int(self.walls),
+                     "k1": repr(float(self.model.k1)), "struck": struck,
+                     "v0": repr(float(d["impulse"]["velocity"])), "dt": repr(self.dt),
+                     "ghostcut": repr(ghost), "thermo_every": max(1, self.steps_per_frame)}
+        for k, v in variables.items():
+            lmp.command(f"variable {k} equal {v}")
+        lmp.file(str(input_file()))
+        self.lmp = lmp
+        self.spacing = spacing
+        self.x0 = spacing * np.arange(self.ntot + 1, dtype=float) - spacing  # by tag (1-based)
+        nc = self.model.n_contacts
+        self.closed = np.ones(nc, dtype=bool) if self.model.gap <= 0 else np.zeros(nc, bool)
+        self.d_visc = 0.0
+        self.d_hyst = 0.0
+        self.events = []
+        self._last_step = None
+        self._acc_prev = None  # total acceleration by tag at the previous step
+        self._power_prev = 0.0
+        self._delta_prev = None
+        self._force_cache = None
+        self.rank = lmp.extract_setting("world_rank")
+        lmp.set_fix_external_callback("contact", self._callback, None)
+        if self.table_file is not None and self.table is not None and self.rank == 0:
+            self.table.write_lammps(self.table_file)
+
+    # ---- the contact hook ---------------------------------------------------------------
+    def _by_tag(self, nlocal):
+        lmp = self.lmp
+        nall = nlocal + lmp.extract_setting("nghost")
+        tags = lmp.numpy.extract_atom("id", nelem=nall)
+        x = lmp.numpy.extract_atom("x", nelem=nall, dim=3)
+        v = lmp.numpy.extract_atom("v", nelem=nall, dim=3)
+        X = np.empty(self.ntot + 1)
+        V = np.empty(self.ntot + 1)
+        X[tags] = x[:, 0]
+        V[tags] = v[:, 0]
+        return X - self.x0, V  # displacement by tag; velocity by tag
+
+    def _contact_geometry(self, disp, vel):
+        """Compression and its rate per contact, contract order (from tag arrays)."""
+        if self.walls:  # contact k joins tag k and k+1; walls are tags 1 and ntot (x = 0)
+            u = disp[1:].copy()
+            u[0] = u[-1] = 0.0
+            w = vel[1:].copy()
+            w[0] = w[-1] = 0.0
+        else:
+            u, w = disp[1:], vel[1:]
+        delta = u[:-1] - u[1:]
+        if self.model.gap:
+            delta = delta - self.model.gap
+        return delta, w[:-1] - w[1:], u, w
+
+    def _callback(self, caller, step, nlocal, tag, x, f):
+        t0 = _time.perf_counter()
+        disp, vel = self._by_tag(nlocal)
+        delta, rate, u, w = self._contact_geometry(disp, vel)
+        new_step = step != self._last_step
+        dt = self.dt
+        if step > 0 and self._acc_prev is not None:
+            # v(t+dt) ~ v(t+dt/2) + dt/2 a(t): second order in the damping force
+            w_est = w + 0.5 * dt * self._acc_prev
+            rate = w_est[:-1] - w_est[1:]
+        if new_step:
+            self._update_states(step, delta)
+        closed = self.closed
+        fc = self.table.force(delta) if self.table is not None else self.law.force(delta)
+        fc = np.where(closed, fc, 0.0)
+        c = self.model.damping
+        if c:
+            fc = fc + np.where(closed, c * rate, 0.0)
+        acc = np.zeros(len(u))
+        acc[:-1] -= fc  # contact k pushes its right bead (+) and its left bead (-)
+        acc[1:] += fc
+        if self.walls:
+            acc[0] = acc[-1] = 0.0
+        ext = acc.copy()
+        if self.model.k3:
+            ext -= self.model.k3 * u**3
+        if self.model.k1:
+            acc_total = ext - self.model.k1 * u
+        else:
+            acc_total = ext
+        if not np.all(np.isfinite(ext)):
+            bad = int(np.flatnonzero(~np.isfinite(ext))[0])
+            raise IntegrationError(f"non-finite force at t = {step * dt:.12g}, bead "
+                                   f"{bad if self.walls else bad + 1}")
+        if self.table is not None:
+            over = delta > self.table.delta_max
+            if np.any(over):
+                k = int(np.flatnonzero(over)[0])
+                raise IntegrationError(
+                    f"compression {delta[k]:.4g} beyond the contact table (delta_max = "
+                    f"{self.table.delta_max:g}) at t = {step * dt:.12g}, contact "
+                    f"{self.model.contact_numbers[k]}")
+        # tag-ordered acceleration (index tag-1) -> local rows
+        f[:, :] = 0.0
+        f[:, 0] = ext[tag - 1]
+        if new_step:
+            power = c * float(np.sum(np.where(closed, rate * rate, 0.0))) if c else 0.0
+            if self._last_step is not None:
+                self.d_visc += 0.5 * (power + self._power_prev) * dt
+            self._power_prev = power
+            self._acc_prev = acc_total
+            self._last_step = step
+            self.stats["steps"] = int(step)
+        energy = float(np.sum(np.where(closed, self.law.energy(delta), 0.0)))
+        self.lmp.fix_external_set_energy_global("contact", energy if self.rank == 0 else 0.0)
+        self.stats["callback_s"] += _time.perf_counter() - t0
+
+    def _update_states(self, step, delta):
+        closed = self.closed
+        opening = closed & self._open_if(delta)
+        closing = ~closed & self._close_if(delta)
+        if not (opening.any() or closing.any()):
+            self._delta_prev = delta
+            return
+        nums = self.model.contact_numbers
+        t = step * self.dt
+        prev = self._delta_prev if self._delta_prev is not None else delta
+        for k in np.flatnonzero(opening | closing):
+            thr = self.law.delta_off if opening[k] else 0.0
+            span = prev[k] - delta[k]
+            frac = (prev[k] - thr) / span if span != 0.0 else 1.0
+            te = t - self.dt + min(max(frac, 0.0), 1.0) * self.dt if step > 0 else t
+            if opening[k]:
+                self.d_hyst += float(self.law.energy(delta[k]))
+                self.events.append(Event(te, int(nums[k]), OPEN))
+            else:
+                self.events.append(Event(te, int(nums[k]), CLOSE))
+        closed[opening] = False
+        closed[closing] = True
+        self.stats["events"] += int(opening.sum() + closing.sum())
+        self._delta_prev = delta
+
+    # ---- frames ------------------------------------------------------------------------
+    def _gather(self):
+        lmp = self.lmp
+        x = np.ctypeslib.as_array(lmp.gather_atoms("x", 1, 3)).reshape(-1, 3)[:, 0]
+        v = np.ctypeslib.as_array(lmp.gather_atoms("v", 1, 3)).reshape(-1, 3)[:, 0]
+        disp = x - self.x0[1:]
+        if self.walls:
+            return disp[1:-1].copy(), v[1:-1].copy()
+        return disp.copy(), v.copy()
+
+    def _frame(self, k, t):
+        x, v = self._gather()
+        fr = Frame(step=k, time=float(t), x=x, v=v, closed=self.closed.copy(),
+                   dissipated_viscous=self.d_visc, dissipated_hysteresis=self.d_hyst,
+                   events=list(self.events))
+        self.events = []
+        return fr
+
+    def frames(self, resume=None):
+        if resume is not None:
+            raise IntegrationError("the LAMMPS backend cannot resume from a checkpoint")
+        wall0 = _time.perf_counter()
+        self._start()
+        lmp = self.lmp
+        try:
+            out_times = self.output_times()
+            lmp.command("run 0 post no")  # set-up: the callback sees the initial state
+            yield self._frame(0, 0.0)
+            for k in range(1, len(out_times)):
+                lmp.command(f"run {self.steps_per_frame} pre no post no")
+                yield self._frame(k, out_times[k])
+        finally:
+            self.stats["wall_time_s"] = _time.perf_counter() - wall0
+            lmp.close()
