@@ -117,12 +117,15 @@ def _markdown(scene, runs, report) -> str:
         f"{p['ftle']:.3g} per time unit. A backend pair is judged up to its horizon: the first "
         f"time either backend's own error estimate exceeds {report['thresholds']['predictable_p']:g} p.",
         "",
-        "| pair | horizon | events compared | max event time offset |",
-        "|---|---|---|---|",
+        "| pair | horizon | events compared | max event time offset | events in the whole run "
+        "| whole-run sequence identical (not judged) |",
+        "|---|---|---|---|---|---|",
     ]
     for name, info in report["pairs"].items():
         lines.append(f"| {name} vs {report['backends'][0]} | {info['horizon']:.4g} | "
-                     f"{info['events_compared']} | {info['max_event_time_offset']:.3g} |")
+                     f"{info['events_compared']} | {info['max_event_time_offset']:.3g} | "
+                     f"{info['events_whole_run'][0]} vs {info['events_whole_run'][1]} | "
+                     f"{'yes' if info['whole_run_sequence_identical'] else 'no'} |")
     lines += ["", "## Runs", "", "| backend | wall time (s) | ledger error / E_imp | "
               "refined run's | events | max own error (p) |", "|---|---|---|---|---|---|"]
     for name, r in report["runs"].items():

