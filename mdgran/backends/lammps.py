@@ -109,7 +109,11 @@ class LammpsBackend(Backend):
             lmp.command(cmd)
         self.lmp = lmp
         self.spacing = spacing
-        self.x0 = spacing * np.arange(self.ntot + 1, dtype=float) - spacing  # by tag (1-based)
+        # initial places by tag, as LAMMPS placed them: the lattice spacing it derives from
+        # the density differs from 1/ntot in the last bits, which would put every contact at
+        # delta = +-1e-17 instead of 0 (and open Hertz and DMT contacts at t = 0)
+        x_init = np.ctypeslib.as_array(lmp.gather_atoms("x", 1, 3)).reshape(-1, 3)[:, 0]
+        self.x0 = np.concatenate([[0.0], x_init])  # index = tag
         nc = self.model.n_contacts
         self.closed = np.ones(nc, dtype=bool) if self.model.gap <= 0 else np.zeros(nc, bool)
         self.d_visc = 0.0

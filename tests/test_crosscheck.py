@@ -1,0 +1,24 @@
+"""Cross-checks on every CI run: shortened versions of the two flagship comparisons,
+reference against LAMMPS, must pass every criterion of the harness."""
+import pytest
+
+from mdgran.compare import compare
+from mdgran.scene import load_scene
+
+lammps_env = pytest.importorskip("mdgran.lammps_env")
+try:
+    lammps_env.check_available()
+except lammps_env.LammpsUnavailable as exc:  # pragma: no cover - CI installs it
+    pytest.skip(str(exc), allow_module_level=True)
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("name", ["micro-star", "macro-hertz"])
+def test_flagship_comparison_short(name, tmp_path):
+    sc = load_scene(name, [("run.duration", 30.0)])
+    rep = compare(sc, ("reference", "lammps"), out_dir=tmp_path)
+    failed = [c for c in rep["criteria"] if not c["passed"]]
+    assert not failed, failed
+    pair = rep["pairs"]["lammps"]
+    assert pair["events_compared"] >= 1
+    assert (tmp_path / "report.md").exists()
