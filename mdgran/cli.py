@@ -104,7 +104,9 @@ def cmd_run(args) -> int:
         return _fail(str(exc), 1)
     if res.error is not None:
         return _fail(f"run failed ({args.out} holds the frames so far): {res.error}", 1)
-    if not args.quiet:
+    from .simulation import mpi_rank
+
+    if not args.quiet and mpi_rank() == 0:
         st = res.stats
         print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
               f"{st.get('events', '?')} events, wall {st.get('wall_time_s', float('nan')):.2f} s, "

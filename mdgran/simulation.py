@@ -31,6 +31,18 @@ class RunResult:
     error: str | None = None
 
 
+def mpi_rank() -> int:
+    """This process's rank under mpiexec (MPICH's PMI_RANK, Open MPI's variable), else 0.
+    Under ``mpiexec -n K mdgran run ... --backend lammps`` every rank runs the driver, LAMMPS
+    splits the chain over the ranks, and only rank 0 writes output."""
+    import os
+
+    for var in ("PMI_RANK", "OMPI_COMM_WORLD_RANK", "PMIX_RANK"):
+        if var in os.environ:
+            return int(os.environ[var])
+    return 0
+
+
 def make_backend(scene, backend: str, **options):
     if backend not in BACKENDS:
         raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
@@ -58,6 +70,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     if mem is not None:
         reps.append(mem)
     writer = None
+    if mpi_rank() != 0:  # under mpiexec: rank 0 alone writes and reports
+        out, progress = None, False
     if out is not None:
         try:
             writer = H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats,
