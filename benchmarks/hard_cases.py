@@ -25,6 +25,9 @@ SHORT = {"hard/dmt": 100.0, "hard/near-dmt": 100.0, "hard/violent-50": 30.0,
          "hard/jkr-displacement": 100.0, "hard/jkr-force": 100.0, "hard/undamped-long": 400.0,
          "hard/tiny": 200.0, "hard/grazing": 40.0, "hard/long-chain": 30.0}
 BOUND = {"reference": 1e-8}
+#: per-case bounds of the reference, as in tests/test_hard_cases.py: the grazing snap-in releases
+#: ~800 E_imp of contact energy; the undamped run's error grows linearly (6e-11 per time unit)
+CASE_BOUND = {"hard/grazing": lambda T: 1e-7, "hard/undamped-long": lambda T: 6e-11 * max(T, 400)}
 
 
 def main(argv=None):
@@ -46,7 +49,10 @@ def main(argv=None):
                 tr = res.trajectory
                 scale = max(sc.impulse_energy, float(tr.ledger["kinetic_energy"].max()))
                 led = float(np.abs(tr.ledger["total_energy"] - tr.e0).max() / scale)
-                ok = res.status == "complete" and led <= BOUND.get(backend, 1e-2)
+                bound = BOUND.get(backend, 1e-2)
+                if backend == "reference" and name in CASE_BOUND:
+                    bound = CASE_BOUND[name](float(sc.data["run"]["duration"]))
+                ok = res.status == "complete" and led <= bound
                 row = {"case": name, "backend": backend, "pass": ok, "ledger": led,
                        "status": res.status, "events": int(len(tr.ev_time))}
             except Exception as exc:  # noqa: BLE001 - reported in the table
