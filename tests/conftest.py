@@ -17,3 +17,22 @@ def scene_factory():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+class InterruptAt:
+    """A reporter that raises KeyboardInterrupt (Ctrl-C) at the first frame at or after ``at``."""
+
+    def __init__(self, at):
+        self.at = at
+
+    def report(self, frame, ledger):
+        if frame.time >= self.at:
+            raise KeyboardInterrupt
+
+    def close(self, status):
+        pass
+
+
+@pytest.fixture
+def interrupt_at():
+    return InterruptAt

@@ -100,23 +100,11 @@ def _write(path, text):
     return path
 
 
-class _Boom:
-    def __init__(self, at):
-        self.at = at
-
-    def report(self, frame, ledger):
-        if frame.time >= self.at:
-            raise KeyboardInterrupt
-
-    def close(self, status):
-        pass
-
-
-def test_interrupted_run_leaves_no_file(tmp_path):
+def test_interrupted_run_leaves_no_file(tmp_path, interrupt_at):
     out = tmp_path / "r.h5"
     with pytest.raises(KeyboardInterrupt):
         run(load_scene("micro-star", [("run.duration", 20.0)]), "reference", out=out,
-            reporters=[_Boom(5.0)])
+            reporters=[interrupt_at(5.0)])
     assert not list(tmp_path.iterdir())
 
 

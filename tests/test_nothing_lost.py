@@ -56,19 +56,7 @@ def test_same_scene_same_backend_is_bitwise_identical(tmp_path):
     assert "[chain]" in attrs["scene"] and attrs["backend"] == "reference"
 
 
-class _Interrupt:
-    def __init__(self, at):
-        self.at = at
-
-    def report(self, frame, ledger):
-        if frame.time >= self.at:
-            raise KeyboardInterrupt
-
-    def close(self, status):
-        pass
-
-
-def test_checkpoint_restart_is_identical(tmp_path):
+def test_checkpoint_restart_is_identical(tmp_path, interrupt_at):
     from mdgran.scene import load_scene
     from mdgran.simulation import run
 
@@ -76,7 +64,7 @@ def test_checkpoint_restart_is_identical(tmp_path):
     whole, parts = tmp_path / "whole.h5", tmp_path / "parts.h5"
     run(sc, "reference", out=whole)
     try:
-        run(sc, "reference", out=parts, checkpoint_every=0.0, reporters=[_Interrupt(31.05)])
+        run(sc, "reference", out=parts, checkpoint_every=0.0, reporters=[interrupt_at(31.05)])
     except KeyboardInterrupt:
         pass
     assert not parts.exists() and (tmp_path / "parts.h5.partial").exists()
