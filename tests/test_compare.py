@@ -65,3 +65,21 @@ def test_cli_compare_exit_status(test_backends, tmp_path, capsys):
     assert main(args + [str(tmp_path / "ok"), "--backends", "reference,tight-reference"]) == 0
     assert main(args + [str(tmp_path / "bad"), "--backends", "reference,flipped-damping"]) == 3
     assert "FAIL" in capsys.readouterr().out
+
+
+def test_event_comparison_is_per_contact():
+    from mdgran.compare import compare_events
+
+    ta = [1.0, 1.001, 2.0, 5.0]
+    sa = [(3, 1), (5, 1), (3, 0), (5, 0)]
+    # two near-simultaneous closes on different contacts in the other order: same physics
+    ev = compare_events([1.001, 1.0, 2.0, 5.0], [(5, 1), (3, 1), (3, 0), (5, 0)], ta, sa,
+                        10.0, 0.01)
+    assert ev["disagreement"] is None and ev["matched"] == 4
+    assert ev["max_offset"] == 0.0
+    # an open missing on contact 3: a disagreement naming it
+    ev = compare_events(ta, sa, [1.0, 1.001, 5.0], [(3, 1), (5, 1), (5, 0)], 10.0, 0.01)
+    assert ev["contacts_differing"] == 1 and "contact 3 open" in ev["disagreement"]
+    # the same event just inside the horizon in one backend, just outside in the other: edge
+    ev = compare_events(ta, sa, ta[:3], sa[:3], 5.005, 0.01)
+    assert ev["disagreement"] is None
