@@ -1,0 +1,193 @@
+"""Work-precision: error against wall time for every method, measured side by side in one run.
+
+    python benchmarks/work_precision.py [--scenes micro-star,macro-hertz,collision-pair]
+                                        [--repeat 3] [--quick]
+
+Methods and their accuracy settings:
+
+* ``reference``   event-driven DOP853 at several tolerances (``run.tolerance``);
+* ``fast``        fixed-step velocity Verlet with each contact event located inside its step
+                  and the step split there, at several ``run.dt``;
+* ``verlet``      the same kernel with step-quantized events (a contact switches at the end of
+                  the step in which it crossed, as a fixed-step MD code does);
+* ``lammps``      LAMMPS with the Python contact hook, at several ``run.dt``.
+
+Errors, against a tight reference run (tolerance 1e-11) of the same scene:
+
+* trajectory error: ``max_{t <= window, i} |x_i(t) - x_i,true(t)|``, the window inside the
+  predictability horizon (micro-star's is ~30 time units: see reference_convergence.py);
+* ledger error: ``max_t |E(t) - E(0)| / E_imp`` over the whole run (no truth needed).
+
+Wall time is that of the run alone (scene loaded, in-memory output, numba compiled by an
+untimed warm-up), the median of ``--repeat`` runs, with max - min as its spread.  The observed
+order of each fixed-step method is the least-squares slope of log error against log dt; for
+the reference, against log tolerance.  The cost of each method at a ledger error of 1e-6 is read
+off a power-law fit of time against ledger error through its points (``extrapolated`` says when
+1e-6 lies outside the measured range).
+
+Writes benchmarks/results/work_precision.json and work_precision.png.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mdgran.scene import load_scene
+from mdgran.simulation import BackendUnavailable, run
+
+RESULTS = Path(__file__).parent / "results"
+TRUTH_TOL = 1e-11
+TARGET_LEDGER = 1e-6
+#: per scene: duration of the run, trajectory-error window
+SCENES = {"micro-star": (400.0, 20.0), "macro-hertz": (400.0, 50.0),
+          "collision-pair": (20.0, 20.0)}
+SETTINGS = {
+    "reference": ("run.tolerance", [1e-5, 1e-6, 1e-7, 1e-8, 1e-9]),
+    "fast": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
+    "verlet": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
+    "lammps": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
+}
+BACKEND = {"reference": ("reference", {}), "fast": ("fast", {}),
+           "verlet": ("fast", {"locate_events": False}), "lammps": ("lammps", {})}
+
+
+def timed_runs(scene, method, repeat):
+    backend, options = BACKEND[method]
+    times, res = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = run(scene, backend, raise_errors=False, **options)
+        times.append(time.perf_counter() - t0)
+    return res, times
+
+
+def slope(x, y):
+    """Least-squares slope of log y against log x over the finite positive points."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    ok = (x > 0) & (y > 0) & np.isfinite(y)
+    if ok.sum() < 2:
+        return None
+    return float(np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)[0])
+
+
+def cost_at(errors, times, target):
+    """Wall time at ledger error ``target`` from a power-law fit of time against error."""
+    e, t = np.asarray(errors, float), np.asarray(times, float)
+    ok = (e > 0) & np.isfinite(e)
+    if ok.sum() < 2:
+        return None, None
+    p = np.polyfit(np.log(e[ok]), np.log(t[ok]), 1)
+    inside = e[ok].min() <= target <= e[ok].max()
+    return float(np.exp(np.polyval(p, np.log(target)))), not inside
+
+
+def measure_scene(name, methods, repeat, quick):
+    duration, window = SCENES[name]
+    if quick:
+        duration = min(duration, 40.0)
+    base = [("run.duration", duration)]
+    truth = run(load_scene(name, base + [("run.tolerance", TRUTH_TOL)]), "reference").trajectory
+    in_window = truth.time <= window + 1e-9
+    rows = []
+    for method in methods:
+        key, values = SETTINGS[method]
+        if quick:
+            values = values[:3]
+        backend, options = BACKEND[method]
+        try:  # warm-up: numba compilation, LAMMPS library load; not timed
+            run(load_scene(name, [("run.duration", 1.0)]), backend, raise_errors=False, **options)
+        except BackendUnavailable as exc:
+            print(f"{method}: skipped ({exc})", flush=True)
+            continue
+        for value in values:
+            scene = load_scene(name, base + [(key, value)])
+            res, times = timed_runs(scene, method, repeat)
+            tr = res.trajectory
+            n = min(len(tr.time), len(truth.time))
+            traj_err = float(np.max(np.abs(tr.x[:n] - truth.x[:n])[in_window[:n]]))
+            row = {"scene": name, "method": method, "setting": key, "value": value,
+                   "status": res.status, "trajectory_error": traj_err,
+                   "ledger_error": res.max_ledger_error,
+                   "wall_s_median": float(np.median(times)),
+                   "wall_s_spread": float(np.max(times) - np.min(times)), "repeats": repeat}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    summary = {}
+    for method in methods:
+        mine = [r for r in rows if r["method"] == method and r["status"] == "complete"]
+        if not mine:
+            continue
+        x = [r["value"] for r in mine]
+        cost, extrapolated = cost_at([r["ledger_error"] for r in mine],
+                                     [r["wall_s_median"] for r in mine], TARGET_LEDGER)
+        summary[method] = {
+            "order_trajectory": slope(x, [r["trajectory_error"] for r in mine]),
+            "order_ledger": slope(x, [r["ledger_error"] for r in mine]),
+            "order_in": SETTINGS[method][0],
+            "wall_s_at_ledger_1e-6": cost, "extrapolated": extrapolated}
+    return {"scene": name, "duration": duration, "window": window, "rows": rows,
+            "summary": summary}
+
+
+def plot(results, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, len(results), figsize=(5.2 * len(results), 8.4), squeeze=False)
+    for col, res in enumerate(results):
+        for row, (err, label) in enumerate([("trajectory_error",
+                                             f"trajectory error, t <= {res['window']:g}"),
+                                            ("ledger_error", "ledger error / E_imp, whole run")]):
+            ax = axes[row, col]
+            for method, s in res["summary"].items():
+                pts = [r for r in res["rows"] if r["method"] == method
+                       and r["status"] == "complete"]
+                order = s["order_trajectory" if row == 0 else "order_ledger"]
+                unit = "tol" if s["order_in"] == "run.tolerance" else "dt"
+                lab = f"{method} (slope in {unit}: {order:.2f})" if order else method
+                ax.loglog([r["wall_s_median"] for r in pts], [max(r[err], 1e-17) for r in pts],
+                          "o-", label=lab)
+            if row == 1:
+                ax.axhline(TARGET_LEDGER, color="k", ls=":", lw=1)
+            ax.set(xlabel="wall time of the run (s, median)", ylabel=label,
+                   title=f"{res['scene']} to t = {res['duration']:g}")
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--methods", default=",".join(SETTINGS))
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="short runs, three settings each")
+    args = ap.parse_args(argv)
+    methods = args.methods.split(",")
+    results = [measure_scene(s, methods, args.repeat, args.quick) for s in args.scenes.split(",")]
+    out = {"target_ledger_error": TARGET_LEDGER, "truth_tolerance": TRUTH_TOL,
+           "quick": args.quick, "results": results}
+    for res in results:
+        s = res["summary"]
+        fastest = min((m for m in s if m != "lammps" and s[m]["wall_s_at_ledger_1e-6"]),
+                      key=lambda m: s[m]["wall_s_at_ledger_1e-6"], default=None)
+        if fastest and "lammps" in s and s["lammps"]["wall_s_at_ledger_1e-6"]:
+            res["speedup_vs_lammps_at_1e-6"] = {
+                "fastest": fastest,
+                "ratio": s["lammps"]["wall_s_at_ledger_1e-6"] / s[fastest]["wall_s_at_ledger_1e-6"],
+                "lammps_extrapolated": s["lammps"]["extrapolated"]}
+        print(res["scene"], json.dumps(s, indent=1), res.get("speedup_vs_lammps_at_1e-6"))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    stem = "work_precision_quick" if args.quick else "work_precision"
+    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1) + "\n")
+    plot(results, RESULTS / f"{stem}.png")
+
+
+if __name__ == "__main__":
+    main()
