@@ -54,8 +54,8 @@ def test_table_file_written(tmp_path):
     path = tmp_path / "contact.table"
     res = run(sc, "lammps", table_file=path)
     text = path.read_text().splitlines()
-    assert "MDGRAN_CONTACT" in text and "N 16001" in text
-    assert res.stats["table"]["force_abs"] < 1e-5
+    assert "MDGRAN_CONTACT" in text and "N 4001" in text
+    assert res.stats["table"]["force_abs"] < 1e-10
 
 
 def test_unavailable_lammps_fails_in_one_line(monkeypatch, capsys, tmp_path):

@@ -23,8 +23,8 @@ substrate term when the scene has one) is a Python callback of ``fix external pf
   recomputes without advancing any state when called twice for the same step (the set-up
   call of a ``run``).  The contact energy is handed to LAMMPS with
   ``fix_external_set_energy_global``, so ``thermo`` shows it (``f_contact``).
-* **Force evaluation** from :class:`mdgran.contact.ContactTable` (16001 nodes uniform in
-  ``sqrt(delta - delta_min)``, second order; 3e-6 absolute error at ``delta = 100``), written
+* **Force evaluation** from :class:`mdgran.contact.ContactTable` (4001 nodes uniform in
+  ``sqrt(delta - delta_min)``, cubic spline in that variable; 2e-12 absolute force error), written
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
 """
@@ -57,7 +57,7 @@ class LammpsBackend(Backend):
     name = "lammps"
     order = 1  # step-quantized snap events: first order in dt (second order between events)
 
-    def __init__(self, scene, comm=None, contact_eval="table", table_points=16001,
+    def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
                  table_file=None, extra_commands=(), **options):
         check_available()  # LammpsUnavailable (an ImportError): one line, before anything runs
         super().__init__(scene, **options)
