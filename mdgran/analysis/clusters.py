@@ -1,0 +1,288 @@
+"""Clusters, re-clustering and the segment measures of paper Sec. IV.B, VI and Appendix A.
+
+**Contact states.**  Contacts use the contract numbering: with fixed walls contact ``k = 1..n+1``
+joins bead ``k-1`` and bead ``k`` (beads ``0`` and ``n+1`` are the walls); a free chain has
+contacts ``2..n``.  A state vector ``closed`` holds one bool per contact in that order.  The
+states at any time are the initial states (all closed in the paper's initial condition, all open
+when the scene has an initial gap) updated by the event list (``ev_kind`` 1 close, 0 open).
+
+**Clusters.**  A cluster is a maximal run of moving beads joined by closed contacts; every bead
+belongs to exactly one cluster (a lone bead is a cluster of size 1, unless ``min_size`` says
+otherwise), so the open bead-bead contacts are the cluster boundaries.  A run whose end bead is
+held by a closed wall contact *counts* as a cluster and records it (``left_wall``,
+``right_wall``).  By default (``attach=True``) the attachment is part of the cluster's identity:
+a run that sticks to or leaves a wall is a new cluster, since its dynamics (its linear modes,
+:mod:`.modes`) change.  With ``attach=False`` only the bead run matters, so wall events form no
+new clusters.
+
+**Re-clustering.**  A newly formed cluster is one present just after an event that was not
+present just before it.  Events at the same instant are handled together.  The cumulative
+number of newly formed clusters ``N(t)`` starts at 0 (the initial clusters are not counted).
+The events that form new clusters split the run into segments; events closer than
+``merge_within`` (time units 1/q) are merged into one re-clustering event, so that a snap-off
+cascade (three contacts within 0.03 in micro-star) does not make segments of vanishing length,
+the "numerical artifacts" of the paper's discretization (Appendix A, Sec. VI).
+
+**Appendix A.**  Smoothed ``N(t)``: cubic spline through ``(t_0, 0)`` (the start pinned to the
+origin), the midpoints of the inner segments at their ``N``, and the start of the last segment at
+its ``N`` with zero slope, constant after (flat over the final stable segment); then the
+smoothing spline of :mod:`.effective_damping` over the frames; its derivative is the
+re-clustering rate (slightly negative values are smoothing artifacts, as in the paper).
+Segment ``m`` ``[t_m, t_(m+1))``: mean ``C_eff`` over it, and rate
+``r_m = (N_(m+1) - N_m) / (t_(m+1) - t_m)`` (the slope joining the leading edges of segment ``m``
+and ``m+1`` in Fig. A1c; undefined, NaN, for the last segment).  The representative segment of a
+run is the one with the largest mean ``C_eff`` among those with a rate (Sec. VI).
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from .effective_damping import SMOOTHING_TIME, smoothing_spline
+
+#: Events closer than this (time units 1/q) form one re-clustering event.  About half the fast
+#: intra-cluster period (2.3 for the paper's chains).
+MERGE_WITHIN = 1.0
+
+Cluster = namedtuple("Cluster", "first last left_wall right_wall")
+Cluster.__doc__ = "A run of beads ``first..last`` (1-based, inclusive) and its wall attachment."
+
+
+# ---- contact states --------------------------------------------------------------------------
+def contact_numbers(n: int, walls: bool = True) -> np.ndarray:
+    """Contract numbers of the contacts: ``1..n+1`` with walls, ``2..n`` without."""
+    return np.arange(1, n + 2) if walls else np.arange(2, n + 1)
+
+
+def initial_states(n: int, walls: bool = True, closed: bool = True) -> np.ndarray:
+    """The paper's initial contact states: every contact closed (open with an initial gap)."""
+    return np.full(len(contact_numbers(n, walls)), bool(closed))
+
+
+def scene_layout(scene) -> tuple:
+    """``(n, walls, initial)`` of a scene: bead count, fixed walls or not, initial states."""
+    ch = scene.data["chain"]
+    n, walls = int(ch["n"]), ch["boundary"] == "fixed"
+    return n, walls, initial_states(n, walls, float(ch.get("initial_gap", 0.0)) <= 0.0)
+
+
+def contact_states(times, ev_time, ev_contact, ev_kind, n: int, walls: bool = True,
+                   initial=None) -> np.ndarray:
+    """Contact states at each of ``times``: bool ``[F, n_contacts]`` (True = closed).
+
+    A frame at time ``t`` shows every event with ``ev_time <= t`` applied.
+    """
+    times = np.asarray(times, float)
+    first = 1 if walls else 2
+    init = initial_states(n, walls) if initial is None else np.asarray(initial, bool)
+    states = np.tile(init, (len(times), 1))
+    for k in np.argsort(ev_time, kind="stable"):
+        i0 = np.searchsorted(times, ev_time[k], side="left")
+        states[i0:, int(ev_contact[k]) - first] = bool(ev_kind[k])
+    return states
+
+
+# ---- clusters of one state -------------------------------------------------------------------
+def clusters_of(closed, n: int, min_size: int = 1) -> list:
+    """Clusters of one contact state vector, left to right, as :class:`Cluster` tuples."""
+    closed = np.asarray(closed, bool)
+    walls = len(closed) == n + 1
+    inner = closed[1:-1] if walls else closed  # bead-bead contacts 2..n: between bead k-1, k
+    out, first = [], 1
+    for k in range(2, n + 2):  # a cluster ends at bead k-1 if contact k is open (or k = n+1)
+        if k == n + 1 or not inner[k - 2]:
+            last = k - 1
+            if last - first + 1 >= min_size:
+                out.append(Cluster(first, last, bool(walls and first == 1 and closed[0]),
+                                   bool(walls and last == n and closed[-1])))
+            first = k
+    return out
+
+
+def _key(c: Cluster, attach: bool):
+    return c if attach else (c.first, c.last)
+
+
+def new_clusters(before: list, after: list, attach: bool = True) -> list:
+    """Clusters of ``after`` that are not in ``before``."""
+    old = {_key(c, attach) for c in before}
+    return [c for c in after if _key(c, attach) not in old]
+
+
+@dataclass
+class ClusterHistory:
+    """Clusters after each distinct event time.
+
+    ``times`` [K] distinct event times; ``clusters`` list of K lists (after the events at that
+    time); ``count`` [K] number of clusters; ``new`` [K] newly formed clusters at that time;
+    ``cumulative`` [K] running sum of ``new``; ``initial``: clusters before the first event.
+    """
+
+    times: np.ndarray
+    clusters: list
+    count: np.ndarray
+    new: np.ndarray
+    cumulative: np.ndarray
+    initial: list
+
+    def cumulative_at(self, t) -> np.ndarray:
+        """Step function ``N(t)``: newly formed clusters up to and including ``t``."""
+        i = np.searchsorted(self.times, np.asarray(t, float), side="right")
+        return np.concatenate(([0], self.cumulative))[i]
+
+    def count_at(self, t) -> np.ndarray:
+        i = np.searchsorted(self.times, np.asarray(t, float), side="right")
+        return np.concatenate(([len(self.initial)], self.count))[i]
+
+
+def cluster_history(ev_time, ev_contact, ev_kind, n: int, walls: bool = True, initial=None,
+                    attach: bool = True, min_size: int = 1) -> ClusterHistory:
+    """Follow the clusters through the event list (see the module docstring)."""
+    first = 1 if walls else 2
+    state = initial_states(n, walls) if initial is None else np.array(initial, bool)
+    ev_time = np.asarray(ev_time, float)
+    order = np.argsort(ev_time, kind="stable")
+    current = clusters_of(state, n, min_size)
+    initial_clusters = current
+    times, clusters, new = [], [], []
+    k = 0
+    while k < len(order):
+        t = ev_time[order[k]]
+        while k < len(order) and ev_time[order[k]] == t:
+            e = order[k]
+            state[int(ev_contact[e]) - first] = bool(ev_kind[e])
+            k += 1
+        after = clusters_of(state, n, min_size)
+        times.append(t)
+        clusters.append(after)
+        new.append(len(new_clusters(current, after, attach)))
+        current = after
+    new = np.array(new, int)
+    count = np.array([len(c) for c in clusters], int)
+    return ClusterHistory(np.array(times, float), clusters, count, new, np.cumsum(new),
+                          initial_clusters)
+
+
+def trajectory_history(traj, scene, attach: bool = True, min_size: int = 1) -> ClusterHistory:
+    """:func:`cluster_history` of a run."""
+    n, walls, init = scene_layout(scene)
+    return cluster_history(traj.ev_time, traj.ev_contact, traj.ev_kind, n, walls, init,
+                           attach, min_size)
+
+
+# ---- segments ----------------------------------------------------------------------------------
+def reclustering_events(history: ClusterHistory, merge_within: float = MERGE_WITHIN):
+    """Times and sizes of re-clustering events: ``(times [E], new [E])``.
+
+    Event times that form new clusters, grouped when each is within ``merge_within`` of the
+    previous one; a group takes its first time and the sum of its new clusters.
+    """
+    t = history.times[history.new > 0]
+    k = history.new[history.new > 0]
+    if len(t) == 0:
+        return t, k
+    start = np.concatenate(([True], np.diff(t) >= merge_within))
+    group = np.cumsum(start) - 1
+    return t[start], np.bincount(group, weights=k).astype(int)
+
+
+@dataclass
+class Segments:
+    """Intervals between re-clustering events: ``start`` [M], ``end`` [M], ``cumulative`` [M]
+    (newly formed clusters up to the segment's start; 0 for the first segment)."""
+
+    start: np.ndarray
+    end: np.ndarray
+    cumulative: np.ndarray
+
+    def __len__(self):
+        return len(self.start)
+
+    @property
+    def lifespan(self) -> np.ndarray:
+        return self.end - self.start
+
+    @property
+    def rate(self) -> np.ndarray:
+        """``r_m = (N_(m+1) - N_m) / lifespan_m`` [M]; NaN for the last segment."""
+        r = np.full(len(self), np.nan)
+        r[:-1] = np.diff(self.cumulative) / self.lifespan[:-1]
+        return r
+
+
+def segments(history: ClusterHistory, t_start: float, t_end: float,
+             merge_within: float = MERGE_WITHIN) -> Segments:
+    """Split ``[t_start, t_end]`` at the re-clustering events (Appendix A.B)."""
+    t, k = reclustering_events(history, merge_within)
+    keep = (t > t_start) & (t < t_end)
+    t, k = t[keep], k[keep]
+    edges = np.concatenate(([t_start], t, [t_end]))
+    return Segments(edges[:-1], edges[1:], np.concatenate(([0], np.cumsum(k))))
+
+
+def smoothed_cumulative(time, segs: Segments, smoothing_time: float = SMOOTHING_TIME):
+    """Appendix A.A: smooth ``N(t)`` and its derivative, the re-clustering rate, on ``time``.
+
+    Returns ``(N_smooth [F], rate [F])``; rate in clusters per time unit (1/q).
+    """
+    time = np.asarray(time, float)
+    m = len(segs)
+    if m == 1:
+        return np.zeros_like(time), np.zeros_like(time)
+    mid = 0.5 * (segs.start + segs.end)
+    kt = np.concatenate(([segs.start[0]], mid[1:-1], [segs.start[-1]]))
+    kv = np.concatenate(([0.0], segs.cumulative[1:-1], [segs.cumulative[-1]]))
+    spline = CubicSpline(kt, kv, bc_type=((2, 0.0), (1, 0.0)))
+    curve = np.where(time < segs.start[-1], spline(np.minimum(time, segs.start[-1])),
+                     segs.cumulative[-1])
+    smooth = smoothing_spline(time, curve, smoothing_time)
+    return smooth(time), smooth.derivative()(time)
+
+
+def segment_means(time, values, segs: Segments) -> np.ndarray:
+    """Time mean of ``values(t)`` (linear between frames) over each segment [M]."""
+    time = np.asarray(time, float)
+    values = np.asarray(values, float)
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (values[1:] + values[:-1]) * np.diff(time))))
+    i0, i1 = np.interp(segs.start, time, integral), np.interp(segs.end, time, integral)
+    mean_at = np.interp(segs.start, time, values)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(segs.lifespan > 0, (i1 - i0) / segs.lifespan, mean_at)
+
+
+def representative_segment(segs: Segments, c_means) -> int:
+    """Index of the segment with the largest mean ``C_eff`` among those with a rate (all but the
+    last); -1 if there is none (no re-clustering)."""
+    c = np.asarray(c_means, float)[:-1]
+    if len(c) == 0 or not np.any(np.isfinite(c)):
+        return -1
+    return int(np.nanargmax(c))
+
+
+@dataclass
+class ReclusteringAnalysis:
+    """Everything of Appendix A for one run (see :func:`analyze_reclustering`)."""
+
+    history: ClusterHistory
+    segments: Segments
+    cumulative_smooth: np.ndarray  # [F]
+    rate: np.ndarray  # [F] smoothed re-clustering rate
+    segment_c_eff: np.ndarray  # [M]
+    segment_rate: np.ndarray  # [M]
+    representative: int  # segment index, -1 if none
+
+
+def analyze_reclustering(traj, scene, c_eff, smoothing_time: float = SMOOTHING_TIME,
+                         merge_within: float = MERGE_WITHIN, attach: bool = True,
+                         min_size: int = 1) -> ReclusteringAnalysis:
+    """Clusters, segments, smoothed rate and segment measures of a run, given its
+    ``c_eff`` [F] (normally :func:`~.effective_damping.effective_damping`)."""
+    hist = trajectory_history(traj, scene, attach, min_size)
+    segs = segments(hist, float(traj.time[0]), float(traj.time[-1]), merge_within)
+    smooth, rate = smoothed_cumulative(traj.time, segs, smoothing_time)
+    means = segment_means(traj.time, c_eff, segs)
+    return ReclusteringAnalysis(hist, segs, smooth, rate, means, segs.rate,
+                                representative_segment(segs, means))
