@@ -16,7 +16,7 @@ def _atomic_write(path: Path, text: str):
     os.replace(tmp, path)
 
 
-def _figures(out: Path, scene, runs, pred, report):
+def _figures(out: Path, scene, runs, pred, report, pairs):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -88,6 +88,58 @@ def _figures(out: Path, scene, runs, pred, report):
     fig.tight_layout()
     fig.savefig(out / "events.png", dpi=110)
     plt.close(fig)
+    _cluster_figures(out, scene, runs, report, pairs, plt)
+
+
+def _cluster_figures(out, scene, runs, report, pairs, plt):
+    """clusters.png: clusters over time, cumulative new clusters, lifetime distributions;
+    c_eff.png: the effective damping of each backend on the same axes."""
+    from .analysis import effective_damping, trajectory_history
+
+    horizon = min(info["horizon"] for info in report["pairs"].values()) if report["pairs"] \
+        else None
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.2))
+    for i, r in enumerate(runs):
+        tr = r.nominal
+        h = trajectory_history(tr, scene)
+        a1.plot(tr.time, h.count_at(tr.time), color=f"C{i}", lw=1.0, label=r.name)
+        a2.plot(tr.time, h.cumulative_at(tr.time), color=f"C{i}", lw=1.2, label=r.name)
+    for name, info in pairs.items():
+        lives = info["clusters"]["lives"]
+        for i, (who, lv) in enumerate(lives.items()):
+            if len(lv):
+                x = np.sort(lv.lifetime)
+                a3.step(x, np.arange(1, len(x) + 1) / len(x), where="post", color=f"C{i}",
+                        label=f"{who}: {len(x)} clusters")
+        lt = report["pairs"][name]["clusters"]["lifetimes"]
+        if lt["pvalue"] is not None:
+            a3.set_title(f"cluster lifetimes {info['clusters']['where']}\n"
+                         f"(ensembles; KS p = {lt['pvalue']:.2g})", fontsize=9)
+    for ax in (a1, a2):
+        if horizon is not None:
+            ax.axvline(horizon, color="k", ls="--", lw=0.8)
+        ax.set_xlabel("time (1/q)")
+        ax.legend(fontsize=7)
+    a1.set(ylabel="clusters", title="number of clusters (dashed: horizon)")
+    a2.set(ylabel="newly formed clusters, cumulative", title="cumulative new clusters")
+    a3.set(xscale="log", xlabel="cluster lifetime (1/q)", ylabel="cumulative fraction")
+    if a3.get_legend_handles_labels()[0]:
+        a3.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "clusters.png", dpi=110)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, r in enumerate(runs):
+        ax.plot(r.nominal.time, effective_damping(r.nominal, scene), color=f"C{i}",
+                lw=1.2, label=r.name)
+    if horizon is not None:
+        ax.axvline(horizon, color="k", ls="--", lw=0.8)
+    ax.set(xlabel="time (1/q)", ylabel="C_eff / C_+",
+           title="effective damping, Eq. 9 (dashed: horizon)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "c_eff.png", dpi=110)
+    plt.close(fig)
 
 
 def _markdown(scene, runs, report) -> str:
@@ -105,8 +157,10 @@ def _markdown(scene, runs, report) -> str:
         "|---|---|---|---|---|",
     ]
     for c in report["criteria"]:
-        lines.append(f"| {c['name']} | {'pass' if c['passed'] else '**FAIL**'} | "
-                     f"{c['measured']:.3g} | {c['threshold']:.3g} | {c['detail']} |")
+        verdict = ("pass" if c["passed"] else "**FAIL**") if c["judged"] else "not judged"
+        measured = f"{c['measured']:.3g}" if c["judged"] else "-"
+        lines.append(f"| {c['name']} | {verdict} | {measured} | {c['threshold']:.3g} | "
+                     f"{c['detail']} |")
     lines += [
         "",
         "## Predictability",
@@ -144,6 +198,10 @@ def _markdown(scene, runs, report) -> str:
         "",
         "![events](events.png)",
         "",
+        "![clusters](clusters.png)",
+        "",
+        "![effective damping](c_eff.png)",
+        "",
         "How to read: each backend's own error estimate is the difference between its nominal "
         "run and a refined run (1/100 of the tolerance for the reference; half the time step "
         "for fixed-step backends, scaled by Richardson's factor). The backends agree when their "
@@ -152,7 +210,7 @@ def _markdown(scene, runs, report) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(out: Path, scene, runs, pred, report):
-    _figures(out, scene, runs, pred, report)
+def write_report(out: Path, scene, runs, pred, report, pairs):
+    _figures(out, scene, runs, pred, report, pairs)
     _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
     _atomic_write(out / "report.md", _markdown(scene, runs, report))

@@ -55,10 +55,14 @@ def pooled(lives: list) -> ClusterLives:
 
 def ks_compare(a, b) -> dict:
     """Two-sample Kolmogorov-Smirnov test: statistic D, p-value, and the sample sizes."""
+    import warnings
+
     from scipy.stats import ks_2samp
 
     a, b = np.asarray(a, float), np.asarray(b, float)
     if len(a) < 2 or len(b) < 2:
         return {"statistic": None, "pvalue": None, "n": [len(a), len(b)]}
-    r = ks_2samp(a, b)
+    with warnings.catch_warnings():  # "exact calculation unsuccessful, using asymptotic"
+        warnings.simplefilter("ignore", RuntimeWarning)
+        r = ks_2samp(a, b)
     return {"statistic": float(r.statistic), "pvalue": float(r.pvalue), "n": [len(a), len(b)]}
