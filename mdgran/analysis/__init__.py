@@ -41,6 +41,9 @@ def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
     * ``c_eff_max_segment``: largest segment-mean ``C_eff / C_+`` (the representative segment,
       Sec. VI; all segments but the last); ``c_eff_max_segment_rate``: that segment's
       re-clustering rate ``r_m`` (clusters per time unit); ``c_eff_max_segment_start``/``_end``.
+    * ``c_eff_late_segment``, ``c_eff_late_segment_rate``, ``c_eff_late_segment_start``: the same
+      with segments starting before ``T_c / 2`` (the primary pulse's first crossing of the
+      chain) left out, so the impact transient cannot be the representative segment.
     * ``c_eff_mean``: time mean of ``C_eff / C_+`` over the run; ``c_eff_peak``: its maximum.
     * ``clusters_formed``: newly formed clusters over the run (cumulative count at the end).
     * ``reclustering_rate_mean``: ``clusters_formed`` divided by the time from the start to the
@@ -58,6 +61,9 @@ def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
     cbar = effective_damping(traj, scene, smoothing_time)
     rc = analyze_reclustering(traj, scene, cbar, smoothing_time, merge_within)
     rep = rc.representative
+    tc = characteristic_period(traj)
+    late = representative_segment(rc.segments, rc.segment_c_eff,
+                                  0.5 * tc if np.isfinite(tc) else -np.inf)
     ev_t, _ = reclustering_events(rc.history, merge_within)
     formed = int(rc.history.cumulative[-1]) if len(rc.history.cumulative) else 0
     tail = t >= t[0] + 0.9 * (t[-1] - t[0])
@@ -66,6 +72,9 @@ def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
         "c_eff_max_segment_rate": rc.segment_rate[rep] if rep >= 0 else None,
         "c_eff_max_segment_start": rc.segments.start[rep] if rep >= 0 else None,
         "c_eff_max_segment_end": rc.segments.end[rep] if rep >= 0 else None,
+        "c_eff_late_segment": rc.segment_c_eff[late] if late >= 0 else None,
+        "c_eff_late_segment_rate": rc.segment_rate[late] if late >= 0 else None,
+        "c_eff_late_segment_start": rc.segments.start[late] if late >= 0 else None,
         "c_eff_mean": np.sum(0.5 * (cbar[1:] + cbar[:-1]) * np.diff(t)) / (t[-1] - t[0]),
         "c_eff_peak": np.max(cbar),
         "clusters_formed": formed,
@@ -74,7 +83,7 @@ def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
         "kinetic_remaining": np.mean(kin[tail]) / kin[0] if kin[0] > 0 else None,
         "kinetic_decay_time": decay_time(t, kin, math.exp(-1.0)),
         "kinetic_decay_time_10": decay_time(t, kin, 0.1),
-        "characteristic_period": characteristic_period(traj),
+        "characteristic_period": tc,
     }
     return {k: (None if v is None or not np.isfinite(v) else
                 (int(v) if isinstance(v, (int, np.integer)) else float(v)))

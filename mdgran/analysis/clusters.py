@@ -253,10 +253,15 @@ def segment_means(time, values, segs: Segments) -> np.ndarray:
         return np.where(segs.lifespan > 0, (i1 - i0) / segs.lifespan, mean_at)
 
 
-def representative_segment(segs: Segments, c_means) -> int:
+def representative_segment(segs: Segments, c_means, t_min: float = -np.inf) -> int:
     """Index of the segment with the largest mean ``C_eff`` among those with a rate (all but the
-    last); -1 if there is none (no re-clustering)."""
-    c = np.asarray(c_means, float)[:-1]
+    last) that start at or after ``t_min``; -1 if there is none (no re-clustering).
+
+    ``t_min`` excludes the impact transient: in the first instants after the impulse ``C_eff``
+    measures the struck bead's dashpots, not re-clustering (in the paper's sweep, at v0 <= 2
+    the literal rule picks a segment [0, 0.2-0.4] with C_eff ~ 50-220 C_+)."""
+    c = np.asarray(c_means, float)[:-1].copy()
+    c[np.asarray(segs.start[:-1]) < t_min] = np.nan
     if len(c) == 0 or not np.any(np.isfinite(c)):
         return -1
     return int(np.nanargmax(c))

@@ -19,11 +19,13 @@ from .clusters import ClusterHistory
 @dataclass
 class ClusterLives:
     """One row per cluster that formed at ``t >= t_from`` and ended before the run's end:
-    ``born`` [C], ``lifetime`` [C] (time units 1/q), ``size`` [C] (beads)."""
+    ``born`` [C], ``lifetime`` [C] (time units 1/q), ``size`` [C] (beads), and the cluster
+    itself (``clusters`` [C], :class:`~.clusters.Cluster`)."""
 
     born: np.ndarray
     lifetime: np.ndarray
     size: np.ndarray
+    clusters: list = None
 
     def __len__(self):
         return len(self.born)
@@ -33,7 +35,7 @@ def cluster_lives(history: ClusterHistory, t_from: float = -np.inf) -> ClusterLi
     """Lifetimes and sizes of the clusters formed at or after ``t_from`` (the initial clusters,
     present before the first event, have no birth time and are not counted)."""
     alive = {c: None for c in history.initial}  # cluster -> birth time (None: initial)
-    born, life, size = [], [], []
+    born, life, size, which = [], [], [], []
     for t, after in zip(history.times, history.clusters):
         now = set(after)
         for c in [c for c in alive if c not in now]:
@@ -42,15 +44,17 @@ def cluster_lives(history: ClusterHistory, t_from: float = -np.inf) -> ClusterLi
                 born.append(t0)
                 life.append(t - t0)
                 size.append(c.last - c.first + 1)
+                which.append(c)
         for c in now:
             alive.setdefault(c, t)
-    return ClusterLives(np.array(born, float), np.array(life, float), np.array(size, int))
+    return ClusterLives(np.array(born, float), np.array(life, float), np.array(size, int), which)
 
 
 def pooled(lives: list) -> ClusterLives:
     """Pool several runs' :class:`ClusterLives` into one sample."""
     return ClusterLives(*(np.concatenate([getattr(x, k) for x in lives]) if lives
-                          else np.zeros(0) for k in ("born", "lifetime", "size")))
+                          else np.zeros(0) for k in ("born", "lifetime", "size")),
+                        [c for x in lives for c in (x.clusters or [])])
 
 
 def ks_compare(a, b) -> dict:
