@@ -1,4 +1,4 @@
-"""Command line: ``mdgran scenes | info | run | compare | sweep`` (contract.md).
+"""Command line: ``mdgran scenes | info | run | compare | sweep | report`` (contract.md).
 
 Exit status: 0 success; 3 a comparison whose verdict fails; 2 bad input (one line on stderr naming the key and what is allowed,
 no traceback, no output file); 1 a failure during a run (the output file is written first,
@@ -156,6 +156,22 @@ def cmd_sweep(args) -> int:
     return 1 if failed else 0
 
 
+def cmd_report(args) -> int:
+    from pathlib import Path
+
+    from .study import make_report
+
+    if args.workers < 1:
+        raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
+    if args.sweep_dir is not None and not (Path(args.sweep_dir) / "sweep.json").exists():
+        raise UsageError(f"--sweep-dir: {args.sweep_dir} holds no sweep.json (a folder written "
+                         "by mdgran sweep)")
+    make_report(args.dir, small=args.small, workers=args.workers, backend=args.backend,
+                sweep_dir=args.sweep_dir, progress=not args.quiet)
+    print(f"report in {args.dir}/report.md")
+    return 0
+
+
 # ---- parser ----------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="mdgran", description="Adhesive micro-granular chain simulations.")
@@ -210,6 +226,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a scene key in every case")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_sweep)
+
+    s = sub.add_parser("report", help="the paper's study: runs what DIR lacks, then every "
+                       "figure and report.md")
+    s.add_argument("dir", help="report folder (runs/, sweep/, figures/ are reused if there)")
+    s.add_argument("--small", action="store_true", help="the sweep's small (CI) version")
+    s.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="parallel processes for the sweep (default: all cores)")
+    s.add_argument("--backend", default="reference", help="backend of the runs")
+    s.add_argument("--sweep-dir", default=None,
+                   help="use this finished mdgran sweep folder instead of DIR/sweep")
+    s.add_argument("--quiet", action="store_true", help="no progress lines")
+    s.set_defaults(func=cmd_report)
     return p
 
 

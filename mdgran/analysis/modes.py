@@ -57,8 +57,10 @@ def modes(k_contacts, k1: float, left_wall: bool = False, right_wall: bool = Fal
     """Frequencies ``omega`` [b] (rad per time unit, ascending) and shapes [b, b] (columns).
 
     A negative eigenvalue (an unstable state) gives a NaN frequency."""
-    w2, shapes = np.linalg.eigh(stiffness_matrix(k_contacts, k1, left_wall, right_wall,
-                                                 k_substrate))
+    kmat = stiffness_matrix(k_contacts, k1, left_wall, right_wall, k_substrate)
+    if not np.all(np.isfinite(kmat)):  # a contact off its attached branch: no linear modes
+        return np.full(len(kmat), np.nan), np.full(kmat.shape, np.nan)
+    w2, shapes = np.linalg.eigh(kmat)
     tiny = 1e-12 * max(1.0, float(np.max(np.abs(w2))))
     w2 = np.where(np.abs(w2) < tiny, 0.0, w2)
     with np.errstate(invalid="ignore"):

@@ -1,0 +1,362 @@
+"""The paper's figures, drawn from runs and sweep results through :mod:`mdgran.analysis`.
+
+One function per figure; each takes trajectories (or sweep case tables), draws onto a new
+matplotlib figure, saves it as PNG and returns the numbers it shows (for the report).  Time is
+shown in characteristic periods ``T_c`` (the primary pulse's double crossing time, see
+:mod:`mdgran.analysis.pulse`), as in the paper; energies over the impulse energy.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import analysis as an
+from .analysis.statistics import cluster_lives
+
+DPI = 120
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path):
+    fig.savefig(path, dpi=DPI)
+    _plt().close(fig)
+
+
+def _tc(traj):
+    tc = an.characteristic_period(traj)
+    return tc if np.isfinite(tc) and tc > 0 else 1.0
+
+
+def _energy_map(ax, traj, scene, tc, boundaries=True, title="", cbar=True, vmax=1.0):
+    """Beads (vertical) x time (horizontal) map of T_i / max_j T_j, cluster boundaries as lines."""
+    emap = an.kinetic_energy_map(traj)
+    t = traj.time / tc
+    im = ax.imshow(emap.T, aspect="auto", origin="lower", cmap="magma", vmin=0, vmax=vmax,
+                   extent=(t[0], t[-1], 0.5, traj.n + 0.5), interpolation="nearest")
+    if boundaries:
+        _draw_boundaries(ax, traj, scene, tc)
+    ax.set(xlabel="time / T_c", ylabel="bead", title=title)
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    if cbar:
+        ax.figure.colorbar(im, ax=ax, label="T_i / max_j T_j", pad=0.01)
+    return im
+
+
+def _draw_boundaries(ax, traj, scene, tc, color="c", lw=0.6):
+    """A horizontal segment at height k - 1/2 wherever contact k is open (between beads)."""
+    open_ = an.boundary_map(traj, scene)  # [F, n_contacts], contract order
+    n, walls, _ = an.scene_layout(scene)
+    first = 1 if walls else 2
+    t = traj.time / tc
+    for j in range(open_.shape[1]):
+        k = j + first
+        o = open_[:, j].astype(np.int8)
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], o, [0]))))
+        for a, b in zip(edges[::2], edges[1::2]):
+            ax.plot([t[a], t[min(b, len(t) - 1)]], [k - 0.5, k - 0.5], color=color, lw=lw)
+
+
+# ---- Fig. 2 ------------------------------------------------------------------------------------
+def fig2(micro, micro_scene, macro, macro_scene, path) -> dict:
+    """(a) macro and (b) micro kinetic-energy maps, (c) T / E_imp, (d) C_eff / C_+."""
+    plt = _plt()
+    fig = plt.figure(figsize=(12, 8.5))
+    gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.1])
+    tcs = {"micro": _tc(micro), "macro": _tc(macro)}
+    _energy_map(fig.add_subplot(gs[0, :]), macro, macro_scene, tcs["macro"], boundaries=False,
+                title=f"(a) macro-hertz: kinetic energy per bead, normalized per instant "
+                      f"(T_c = {tcs['macro']:.3g})")
+    _energy_map(fig.add_subplot(gs[1, :]), micro, micro_scene, tcs["micro"],
+                title=f"(b) micro-star: the same, cluster boundaries (open contacts) in cyan "
+                      f"(T_c = {tcs['micro']:.3g})")
+    axc, axd = fig.add_subplot(gs[2, 0]), fig.add_subplot(gs[2, 1])
+    out = {"T_c": tcs}
+    for tr, sc, name, col in ((macro, macro_scene, "macro", "C0"), (micro, micro_scene, "micro", "C3")):
+        t = tr.time / tcs[name]
+        e_imp = sc.impulse_energy
+        axc.plot(t, tr.ledger["kinetic_energy"] / e_imp, color=col, lw=0.6, alpha=0.45)
+        axc.plot(t, an.smoothed_kinetic(tr) / e_imp, color=col, lw=1.6, label=f"{name}: <<T>>")
+        cbar = an.effective_damping(tr, sc)
+        axd.plot(t, cbar, color=col, lw=1.4, label=name)
+        out[name] = {"kinetic_remaining": an.run_summary(tr, sc)["kinetic_remaining"],
+                     "c_eff_peak": float(np.max(cbar)), "c_eff_mean": float(np.mean(cbar))}
+    axc.set(xlabel="time / T_c", ylabel="T / E_imp", title="(c) total kinetic energy (thin: "
+            "instantaneous; thick: envelope mean)")
+    axc.legend(fontsize=8)
+    axd.set(xlabel="time / T_c", ylabel="C_eff / C_+", title="(d) effective damping, Eq. 9")
+    axd.legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, path)
+    return out
+
+
+# ---- Fig. 3 ------------------------------------------------------------------------------------
+def long_lived_clusters(traj, scene, count: int = 4, min_size: int = 3, min_periods: float = 4.0):
+    """The ``count`` longest-lived clusters of at least ``min_size`` beads whose lifetime spans
+    at least ``min_periods`` periods of their lowest linearized mode; sorted by birth time.
+    Returns ``[(cluster, t_born, t_end, omegas)]`` (clusters alive at the run's end run to it)."""
+    hist = an.trajectory_history(traj, scene)
+    lives = cluster_lives(hist)
+    rows = list(zip(lives.clusters, lives.born, lives.born + lives.lifetime))
+    if hist.clusters:  # clusters alive at the end, censored there
+        ended = {(c, b) for c, b, _ in rows}
+        born = {}
+        for t, after in zip(hist.times, hist.clusters):
+            for c in after:
+                born.setdefault(c, t)
+            for c in list(born):
+                if c not in after:
+                    born.pop(c)
+        rows += [(c, b, float(traj.time[-1])) for c, b in born.items() if (c, b) not in ended]
+    rows = [r for r in rows if r[0].last - r[0].first + 1 >= min_size]
+    rows.sort(key=lambda r: r[2] - r[1], reverse=True)
+    picked = []
+    for c, t0, t1 in rows:
+        # skip the first period of the cluster's life (its formation transient)
+        a, b = t0 + 0.15 * (t1 - t0), t1
+        if np.count_nonzero((traj.time >= a) & (traj.time <= b)) < 20:
+            continue
+        omega, _, _ = an.cluster_modes_in_run(traj, scene, c, a, b)
+        if not np.all(np.isfinite(omega[:2])) or omega[0] <= 0:
+            continue
+        if (b - a) * omega[0] / (2 * math.pi) < min_periods:
+            continue
+        if any(p[0] == c and abs(p[1] - t0) < 1e-9 for p in picked):
+            continue
+        picked.append((c, a, b, omega))
+        if len(picked) == count:
+            break
+    return sorted(picked, key=lambda p: p[1])
+
+
+def fig3(traj, scene, path) -> dict:
+    """(a) micro-star's energy map with the chosen clusters boxed; (b-e) wavelet spectra of
+    each cluster's middle bead with its first two linearized frequencies (dashed)."""
+    plt = _plt()
+    picked = long_lived_clusters(traj, scene)
+    tc = _tc(traj)
+    fig = plt.figure(figsize=(12, 8))
+    gs = fig.add_gridspec(2, max(len(picked), 1), height_ratios=[1.1, 1])
+    ax = fig.add_subplot(gs[0, :])
+    _energy_map(ax, traj, scene, tc, title=f"(a) micro-star: the {len(picked)} longest-lived "
+                "clusters of 3 or more beads (white boxes); their middle bead is analysed below")
+    roman = ["I", "II", "III", "IV", "V", "VI"]
+    rows = []
+    for k, (c, t0, t1, omega) in enumerate(picked):
+        ax.add_patch(plt.Rectangle((t0 / tc, c.first - 0.5), (t1 - t0) / tc, c.last - c.first + 1,
+                                   fill=False, ec="w", lw=2.0))
+        ax.text(t0 / tc + 0.1, c.last + 0.1, roman[k], color="k", fontsize=10, va="top",
+                bbox={"fc": "w", "ec": "none", "pad": 1.5})
+        mid = (c.first + c.last) // 2
+        t, om, amp = an.wavelet_spectrum(traj, mid, t0=t0, t1=t1, quantity="v")
+        ridge = an.peak_frequency(om, amp)
+        a2 = fig.add_subplot(gs[1, k])
+        a2.pcolormesh(t / tc, om, amp, shading="auto", cmap="viridis")
+        for j, ls in ((0, "--"), (1, ":")):
+            a2.axhline(omega[j], color="w", ls=ls, lw=1.2)
+        a2.set(yscale="log", xlabel="time / T_c",
+               title=f"({'bcdef'[k]}) cluster {roman[k]}: beads {c.first}-{c.last}, bead {mid}",
+               ylim=(max(om[0], 0.3 * omega[0]), min(om[-1], 4 * omega[-1])))
+        if k == 0:
+            a2.set_ylabel("frequency (rad / time unit)")
+        mean_ridge = float(np.median(ridge))
+        rows.append({"cluster": roman[k], "beads": [c.first, c.last], "walls":
+                     [c.left_wall, c.right_wall], "t": [t0, t1], "omega_1": float(omega[0]),
+                     "omega_2": float(omega[1]), "wavelet_ridge_median": mean_ridge})
+    fig.tight_layout()
+    _save(fig, path)
+    return {"clusters": rows}
+
+
+# ---- Fig. 4 ------------------------------------------------------------------------------------
+def fig4(traj, scene, path) -> dict:
+    """Relative velocity amplitude between neighbours (running maximum over 1 time unit)."""
+    plt = _plt()
+    tc = _tc(traj)
+    n, walls, _ = an.scene_layout(scene)
+    rel = an.relative_velocity_map(traj, walls, window=1.0)
+    first = 1 if walls else 2
+    fig, ax = plt.subplots(figsize=(12, 4.2))
+    t = traj.time / tc
+    im = ax.imshow(rel.T, aspect="auto", origin="lower", cmap="inferno",
+                   extent=(t[0], t[-1], first - 0.5, first + rel.shape[1] - 0.5),
+                   vmax=np.percentile(rel, 99.5), interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="|v_(k-1) - v_k| (p q), max over 1 time unit", pad=0.01)
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    ax.set(xlabel="time / T_c", ylabel="contact k (joins beads k-1, k)",
+           title="micro-star: amplitude of relative velocity between neighbouring beads")
+    fig.tight_layout()
+    _save(fig, path)
+    return {"max": float(rel.max())}
+
+
+# ---- Fig. 5 ------------------------------------------------------------------------------------
+def fig5(traj, scene, path) -> dict:
+    """Cumulative new clusters (raw and smoothed), re-clustering rate and C_eff, with the
+    coincidence of their peaks."""
+    plt = _plt()
+    tc = _tc(traj)
+    cbar = an.effective_damping(traj, scene)
+    rc = an.analyze_reclustering(traj, scene, cbar)
+    co = an.run_coincidence(traj, scene)
+    t = traj.time / tc
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    a1.step(t, rc.history.cumulative_at(traj.time), where="post", color="0.5", lw=1,
+            label="cumulative new clusters N(t)")
+    a1.plot(t, rc.cumulative_smooth, color="C0", lw=1.6, label="smoothed (Appendix A)")
+    a1.set(ylabel="clusters formed")
+    a1.legend(fontsize=8)
+    a2.plot(t, rc.rate, color="C0", lw=1.5, label="re-clustering rate dN/dt (per time unit)")
+    a2.set_ylabel("re-clustering rate", color="C0")
+    for p in co["rate_peaks"]:
+        a2.axvline(p / tc, color="C0", ls=":", lw=1)
+    a3 = a2.twinx()
+    a3.plot(t, cbar, color="C3", lw=1.3, label="C_eff / C_+")
+    a3.plot(co["c_eff_peaks"] / tc, np.interp(co["c_eff_peaks"], traj.time, cbar), "v",
+            color="C3", ms=6)
+    a3.set_ylabel("C_eff / C_+", color="C3")
+    a2.set(xlabel="time / T_c", title=f"peaks: {len(co['c_eff_peaks'])} of C_eff (triangles), "
+           f"{len(co['rate_peaks'])} of the rate (dotted); fraction of C_eff peaks within T_c of "
+           f"a rate peak {co['fraction']:.2f} vs {co['null_mean']:.2f} +- {co['null_std']:.2f} "
+           f"for shifted peaks (p = {co['p_value']:.3f})")
+    a2.title.set_fontsize(9)
+    fig.tight_layout()
+    _save(fig, path)
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in co.items()
+            if k != "null"}
+
+
+# ---- Fig. 6 and B1-B3: the sweep grid ----------------------------------------------------------
+def _grid_axes(plt, k1s, v0s, size=(1.5, 1.1)):
+    fig, axs = plt.subplots(len(v0s), len(k1s), figsize=(size[0] * len(k1s) + 1.2,
+                                                         size[1] * len(v0s) + 1.0),
+                            sharex=True, sharey=True, squeeze=False)
+    return fig, axs
+
+
+def fig6(cases, path, pick=None) -> dict:
+    """Four sweep cases (softest and stiffest substrate x a low and a high impulse): (a) energy
+    maps, (b) C_eff / C_+."""
+    plt = _plt()
+    k1s = sorted({c["k1"] for c in cases})
+    v0s = sorted({c["v0"] for c in cases})
+    pick = pick or [(k1s[0], v0s[len(v0s) // 3]), (k1s[0], v0s[2 * len(v0s) // 3]),
+                    (k1s[-1], v0s[len(v0s) // 3]), (k1s[-1], v0s[2 * len(v0s) // 3])]
+    chosen = [next(c for c in cases if c["k1"] == k and c["v0"] == v) for k, v in pick]
+    fig, axs = plt.subplots(2, len(chosen), figsize=(3.4 * len(chosen), 6.4), squeeze=False)
+    for j, c in enumerate(chosen):
+        tr, sc = c["traj"](), c["scene"]
+        tc = _tc(tr)
+        _energy_map(axs[0, j], tr, sc, tc, cbar=False,
+                    title=f"K1 = {c['k1']:g} N/m, v0 = {c['v0']:g}")
+        axs[1, j].plot(tr.time / tc, an.effective_damping(tr, sc), color="C3", lw=1.2)
+        axs[1, j].set(xlabel="time / T_c", ylabel="C_eff / C_+" if j == 0 else "")
+    fig.suptitle("(a) kinetic energy maps and (b) effective damping for four sweep cases")
+    fig.tight_layout()
+    _save(fig, path)
+    return {"cases": [(c["k1"], c["v0"]) for c in chosen]}
+
+
+def fig_b(cases, paths) -> dict:
+    """B1: energy maps of every case; B2: C_eff / C_+ of every case with its representative
+    segment shaded; B3: the smoothed re-clustering rate of every case."""
+    plt = _plt()
+    k1s = sorted({c["k1"] for c in cases})
+    v0s = sorted({c["v0"] for c in cases})
+    figs = [_grid_axes(plt, k1s, v0s) for _ in range(3)]
+    for c in cases:
+        i, j = v0s.index(c["v0"]), k1s.index(c["k1"])
+        tr, sc = c["traj"](), c["scene"]
+        tc = _tc(tr)
+        _energy_map(figs[0][1][i, j], tr, sc, tc, cbar=False, boundaries=False)
+        cbar = an.effective_damping(tr, sc)
+        rc = an.analyze_reclustering(tr, sc, cbar)
+        ax = figs[1][1][i, j]
+        ax.plot(tr.time / tc, cbar, color="C3", lw=0.7)
+        m = an.representative_segment(rc.segments, rc.segment_c_eff, 0.5 * tc)
+        if m >= 0:
+            ax.axvspan(rc.segments.start[m] / tc, rc.segments.end[m] / tc, color="C1", alpha=0.5)
+        ax.set_ylim(0, 100)
+        figs[2][1][i, j].plot(tr.time / tc, rc.rate, color="C0", lw=0.7)
+        for f in figs:
+            a = f[1][i, j]
+            a.tick_params(labelsize=6)
+            a.set(xlabel="", ylabel="", title="")
+    titles = ["B1: kinetic energy maps (bead vs time / T_c)",
+              "B2: C_eff / C_+ (0-100) against time / T_c (shaded: representative segment, "
+              "t >= T_c/2)",
+              "B3: smoothed re-clustering rate against time / T_c"]
+    for (fig, axs), title, path in zip(figs, titles, paths):
+        for j, k in enumerate(k1s):
+            axs[0, j].set_title(f"K1 = {k:g} N/m", fontsize=7)
+        for i, v in enumerate(v0s):
+            axs[i, 0].set_ylabel(f"v0 = {v:g}", fontsize=7)
+        fig.suptitle(title + "\nrows: impulse v0, columns: substrate stiffness K1", fontsize=10)
+        fig.tight_layout(rect=(0, 0, 1, 0.97))
+        _save(fig, path)
+    return {"grid": [len(v0s), len(k1s)]}
+
+
+# ---- Fig. 7 ------------------------------------------------------------------------------------
+def fit_slope(x, y) -> dict:
+    """Least-squares line y = a + b x with the 95% confidence interval of the slope b
+    (Student t with n - 2 degrees of freedom), Pearson r and Spearman's rank correlation."""
+    from scipy import stats
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if len(x) < 3:
+        return {"n": int(len(x))}
+    r = stats.linregress(x, y)
+    half = stats.t.ppf(0.975, len(x) - 2) * r.stderr
+    sp = stats.spearmanr(x, y)
+    return {"n": int(len(x)), "slope": float(r.slope), "intercept": float(r.intercept),
+            "slope_ci95": [float(r.slope - half), float(r.slope + half)],
+            "pearson_r": float(r.rvalue), "p_value": float(r.pvalue),
+            "spearman_rho": float(sp.statistic), "spearman_p": float(sp.pvalue)}
+
+
+def fig7(cases, path, rule: str = "") -> dict:
+    """Max segment C_eff against log10 of its re-clustering rate, marker size for the impulse,
+    shade for the stiffness, with the fitted line and its slope's 95% interval.  ``rule`` says
+    how the representative segment was chosen (shown in the title)."""
+    plt = _plt()
+    rows = [c for c in cases if c.get("c_eff_max_segment") is not None
+            and (c.get("c_eff_max_segment_rate") or 0) > 0]
+    x = np.log10([c["c_eff_max_segment_rate"] for c in rows])
+    y = np.array([c["c_eff_max_segment"] for c in rows])
+    fit = fit_slope(x, y)
+    fig, ax = plt.subplots(figsize=(7.5, 5.5))
+    k1 = np.array([c["k1"] for c in rows])
+    e_imp = np.array([0.5 * c["v0"] ** 2 for c in rows])
+    def size(e):
+        return 12 + 60 * np.log10(e / e_imp.min() + 1)
+
+    sc = ax.scatter(x, y, s=size(e_imp), c=k1, cmap="viridis", edgecolors="k", linewidths=0.5,
+                    alpha=0.85)
+    for e in sorted({float(e_imp.min()), float(np.median(e_imp)), float(e_imp.max())}):
+        ax.scatter([], [], s=size(e), c="w", edgecolors="k", label=f"E_imp = {e:.3g} eta p")
+    fig.colorbar(sc, ax=ax, label="substrate stiffness K1 (N/m)")
+    if "slope" in fit:
+        xx = np.linspace(x.min(), x.max(), 50)
+        ax.plot(xx, fit["intercept"] + fit["slope"] * xx, "k--", lw=1.2,
+                label=f"slope {fit['slope']:.3g}, 95% CI [{fit['slope_ci95'][0]:.3g}, "
+                      f"{fit['slope_ci95'][1]:.3g}], n = {fit['n']}")
+    ax.legend(fontsize=8, loc="upper left", labelspacing=1.2)
+    ax.set(xlabel="log10 re-clustering rate of the segment (clusters per time unit)",
+           ylabel="max segment-mean C_eff / C_+",
+           title=f"Fig. 7: representative segment of each case (size: impulse energy)\n{rule}")
+    ax.title.set_fontsize(10)
+    fig.tight_layout()
+    _save(fig, path)
+    return fit
