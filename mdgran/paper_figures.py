@@ -326,7 +326,8 @@ def fit_slope(x, y) -> dict:
             "spearman_rho": float(sp.statistic), "spearman_p": float(sp.pvalue)}
 
 
-def fig7(cases, path, rule: str = "") -> dict:
+def fig7(cases, path, rule: str = "", color_key: str = "k1",
+         color_label: str = "substrate stiffness K1 (N/m)", title: str = "Fig. 7") -> dict:
     """Max segment C_eff against log10 of its re-clustering rate, marker size for the impulse,
     shade for the stiffness, with the fitted line and its slope's 95% interval.  ``rule`` says
     how the representative segment was chosen (shown in the title)."""
@@ -337,16 +338,17 @@ def fig7(cases, path, rule: str = "") -> dict:
     y = np.array([c["c_eff_max_segment"] for c in rows])
     fit = fit_slope(x, y)
     fig, ax = plt.subplots(figsize=(7.5, 5.5))
-    k1 = np.array([c["k1"] for c in rows])
+    shade = np.array([c["params"].get(color_key, c.get(color_key)) if "params" in c
+                      else c[color_key] for c in rows], float)
     e_imp = np.array([0.5 * c["v0"] ** 2 for c in rows])
     def size(e):
         return 12 + 60 * np.log10(e / e_imp.min() + 1)
 
-    sc = ax.scatter(x, y, s=size(e_imp), c=k1, cmap="viridis", edgecolors="k", linewidths=0.5,
+    sc = ax.scatter(x, y, s=size(e_imp), c=shade, cmap="viridis", edgecolors="k", linewidths=0.5,
                     alpha=0.85)
     for e in sorted({float(e_imp.min()), float(np.median(e_imp)), float(e_imp.max())}):
         ax.scatter([], [], s=size(e), c="w", edgecolors="k", label=f"E_imp = {e:.3g} eta p")
-    fig.colorbar(sc, ax=ax, label="substrate stiffness K1 (N/m)")
+    fig.colorbar(sc, ax=ax, label=color_label)
     if "slope" in fit:
         xx = np.linspace(x.min(), x.max(), 50)
         ax.plot(xx, fit["intercept"] + fit["slope"] * xx, "k--", lw=1.2,
@@ -355,7 +357,7 @@ def fig7(cases, path, rule: str = "") -> dict:
     ax.legend(fontsize=8, loc="upper left", labelspacing=1.2)
     ax.set(xlabel="log10 re-clustering rate of the segment (clusters per time unit)",
            ylabel="max segment-mean C_eff / C_+",
-           title=f"Fig. 7: representative segment of each case (size: impulse energy)\n{rule}")
+           title=f"{title}: representative segment of each case (size: impulse energy)\n{rule}")
     ax.title.set_fontsize(10)
     fig.tight_layout()
     _save(fig, path)

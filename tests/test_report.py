@@ -28,12 +28,15 @@ def test_report_small(tmp_path):
     out = tmp_path / "rep"
     from mdgran.study import make_report
 
-    nb = make_report(out, small=True, workers=2, duration=150.0, progress=False)
+    nb = make_report(out, small=True, workers=2, duration=150.0, progress=False,
+                     beyond=("lambda-range",))
     text = (out / "report.md").read_text()
     for f in ("fig2", "fig3", "fig4", "fig5", "fig6", "figB1", "figB2", "figB3", "fig7"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 10_000, f
         assert f"figures/{f}.png" in text
+    assert "## Beyond the paper" in text and (out / "figures" / "beyond-lambda-range.png").exists()
     data = json.loads((out / "report.json").read_text())
+    assert data["beyond"]["lambda-range"]["cases"] == 2
     assert data["sweep"]["cases"] == 4 and data["sweep"]["max_ledger_error"] < 1e-8
     # micro-star's kinetic energy falls below 1/10 of T(0) earlier than macro-hertz's
     d = nb["decay"]
