@@ -1,0 +1,127 @@
+"""The fast backend against independent values: the reference backend (trajectories, event
+sequences), conservation laws (energy ledger, momentum, loop energy per snap-off), and itself
+(determinism, checkpoint-resume).  Numba compiles each variant once (cached on disk)."""
+import numpy as np
+import pytest
+
+from mdgran.backends.base import IntegrationError
+from mdgran.scene import SceneError, load_scene
+from mdgran.simulation import run
+
+
+def _slope(dts, errs):
+    """Least-squares order p of err ~ dt^p."""
+    return float(np.polyfit(np.log(dts), np.log(errs), 1)[0])
+
+
+def _errors(name, duration, dts, locate, ref_tol):
+    over = [("run.duration", duration)]
+    ref = run(load_scene(name, over + [("run.tolerance", ref_tol)]), "reference").trajectory
+    errs = []
+    for dt in dts:
+        tr = run(load_scene(name, over + [("run.dt", dt)]), "fast",
+                 locate_events=locate).trajectory
+        assert len(tr.ev_time) == len(ref.ev_time) > 0  # the window holds events
+        errs.append(np.max(np.abs(tr.x - ref.x)))
+    return np.array(errs)
+
+
+# collision-pair: a snap-in and a snap-off (the force ~ sqrt(delta - delta_min) singularity);
+# micro-star to t = 20: a wall contact opens and closes; dt divides output_interval
+CASES = {"collision-pair": (20.0, [0.002, 0.001, 0.0005, 0.00025], 1e-12),
+         "micro-star": (20.0, [0.005, 0.0025, 0.00125, 0.000625], 1e-11)}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_second_order_with_located_events_first_order_without(name):
+    duration, dts, tol = CASES[name]
+    located = _errors(name, duration, dts, True, tol)
+    quantized = _errors(name, duration, dts, False, tol)
+    p_loc, p_q = _slope(dts, located), _slope(dts, quantized)
+    pairwise = np.log2(located[:-1] / located[1:])
+    assert p_loc >= 1.8 and pairwise.min() >= 1.6, (located, pairwise)
+    assert p_q <= 1.5, quantized  # step-quantized switching: first order through events
+    assert quantized[-1] > 10 * located[-1]
+
+
+@pytest.mark.parametrize("name", ["micro-star", "dmt-chain", "macro-hertz"])
+def test_same_event_sequence_as_reference(name):
+    over = [("run.duration", 40.0)]
+    ref = run(load_scene(name, over), "reference").trajectory
+    fast = [run(load_scene(name, over + [("run.dt", dt)]), "fast").trajectory
+            for dt in (0.0025, 0.00125)]
+    lags = []
+    for tr in fast:
+        assert len(tr.ev_time) == len(ref.ev_time) > 5
+        assert np.array_equal(tr.ev_contact, ref.ev_contact)
+        assert np.array_equal(tr.ev_kind, ref.ev_kind)
+        lags.append(np.max(np.abs(tr.ev_time - ref.ev_time)))
+    assert lags[0] < 0.01 and lags[1] < lags[0] / 3, lags  # event times converge ~ dt^2
+
+
+def test_ledger_closure_scales_like_dt_squared():
+    over = [("run.duration", 60.0)]
+    dts = [0.005, 0.0025, 0.00125]
+    errs = []
+    for dt in dts:
+        r = run(load_scene("micro-star", over + [("run.dt", dt)]), "fast")
+        assert r.trajectory.ledger["dissipated_hysteresis"][-1] > 0  # snap-offs happened
+        errs.append(r.max_ledger_error)
+    assert 1.8 <= _slope(dts, errs) <= 2.3, errs
+    assert errs[1] < 1e-4  # of the impulse energy, at the scene's dt
+
+
+def test_collision_pair_conservation_laws():
+    sc = load_scene("collision-pair", [("run.dt", 0.001)])
+    from mdgran.chain import model_from_scene
+
+    w = model_from_scene(sc).law.loop_energy
+    tr = run(sc, "fast").trajectory
+    # momentum: contact forces are equal and opposite, no substrate
+    assert np.allclose(tr.v.sum(axis=1), 3.0, rtol=0, atol=1e-12)
+    # each snap-off loses V(delta_off) = W; the step ends on delta_off to rounding
+    n_open = int(np.sum(tr.ev_kind == 0))
+    assert n_open == 1
+    assert tr.ledger["dissipated_hysteresis"][-1] == pytest.approx(n_open * w, rel=1e-12)
+
+
+def test_dt_must_divide_output_interval():
+    with pytest.raises(SceneError, match="run.dt"):
+        run(load_scene("micro-star", [("run.duration", 1.0), ("run.dt", 0.003)]), "fast")
+
+
+def test_compression_beyond_table_is_an_integration_error():
+    sc = load_scene("collision-pair", [("impulse.velocity", 40.0), ("run.duration", 2.0)])
+    with pytest.raises(IntegrationError, match=r"t = .*contact 2"):
+        run(sc, "fast", delta_max=2.0)
+
+
+def _datasets(path):
+    import h5py
+
+    out = {}
+    with h5py.File(path) as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
+                     if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def test_deterministic_and_checkpoint_resume_is_identical(tmp_path, interrupt_at):
+    sc = load_scene("micro-star", [("run.duration", 40.0)])
+    paths = [tmp_path / "a.h5", tmp_path / "b.h5"]
+    for p in paths:
+        run(sc, "fast", out=p)
+    da, db = _datasets(paths[0]), _datasets(paths[1])
+    assert da.keys() == db.keys() and "events/time" in da and len(da["events/time"]) > 5
+    for k in da:
+        assert da[k].tobytes() == db[k].tobytes(), k
+    parts = tmp_path / "parts.h5"
+    with pytest.raises(KeyboardInterrupt):
+        run(sc, "fast", out=parts, checkpoint_every=0.0, reporters=[interrupt_at(20.05)])
+    assert not parts.exists() and (tmp_path / "parts.h5.partial").exists()
+    res = run(sc, "fast", out=parts, checkpoint_every=0.0, resume=True)
+    assert res.trajectory.time[0] > 20  # it did resume, not restart
+    dp = _datasets(parts)
+    assert dp.keys() == da.keys()
+    for k in da:
+        assert da[k].tobytes() == dp[k].tobytes(), k
