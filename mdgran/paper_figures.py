@@ -327,10 +327,13 @@ def fit_slope(x, y) -> dict:
 
 
 def fig7(cases, path, rule: str = "", color_key: str = "k1",
-         color_label: str = "substrate stiffness K1 (N/m)", title: str = "Fig. 7") -> dict:
+         color_label: str = "substrate stiffness K1 (N/m)", title: str = "Fig. 7",
+         log_color: bool = False) -> dict:
     """Max segment C_eff against log10 of its re-clustering rate, marker size for the impulse,
     shade for the stiffness, with the fitted line and its slope's 95% interval.  ``rule`` says
-    how the representative segment was chosen (shown in the title)."""
+    how the representative segment was chosen (shown in the title).  ``color_key`` picks
+    another parameter for the shade; ``log_color`` shades it on a log scale (linear below
+    0.01), for lambda, which spans 0 to 5 with most values below 1."""
     plt = _plt()
     rows = [c for c in cases if c.get("c_eff_max_segment") is not None
             and (c.get("c_eff_max_segment_rate") or 0) > 0]
@@ -344,8 +347,12 @@ def fig7(cases, path, rule: str = "", color_key: str = "k1",
     def size(e):
         return 12 + 60 * np.log10(e / e_imp.min() + 1)
 
-    sc = ax.scatter(x, y, s=size(e_imp), c=shade, cmap="viridis", edgecolors="k", linewidths=0.5,
-                    alpha=0.85)
+    from matplotlib.colors import Normalize, SymLogNorm
+
+    norm = (SymLogNorm(0.01, vmin=shade.min(), vmax=shade.max()) if log_color
+            else Normalize(shade.min(), shade.max()))
+    sc = ax.scatter(x, y, s=size(e_imp), c=shade, cmap="viridis", norm=norm, edgecolors="k",
+                    linewidths=0.5, alpha=0.85)
     for e in sorted({float(e_imp.min()), float(np.median(e_imp)), float(e_imp.max())}):
         ax.scatter([], [], s=size(e), c="w", edgecolors="k", label=f"E_imp = {e:.3g} eta p")
     fig.colorbar(sc, ax=ax, label=color_label)

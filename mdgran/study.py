@@ -25,10 +25,10 @@ from .scene import load_scene
 from .trajectory import read_h5
 
 FLAGSHIP = ("micro-star", "macro-hertz")
-#: beyond the paper: sweep name -> (axis shown as colour, its label)
-BEYOND = {"chain-100": ("substrate.k1_si", "substrate stiffness K1 (N/m)"),
-          "chain-1000": ("substrate.k1_si", "substrate stiffness K1 (N/m)"),
-          "lambda-range": ("contact.lambda", "Maugis parameter lambda")}
+#: beyond the paper: sweep name -> (axis shown as colour, its label, log colour scale)
+BEYOND = {"chain-100": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False),
+          "chain-1000": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False),
+          "lambda-range": ("contact.lambda", "Maugis parameter lambda", True)}
 
 
 def _atomic_write(path: Path, text: str):
@@ -130,13 +130,13 @@ def make_report(out, small: bool = False, workers: int | None = None,
         run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
                   progress=progress)
         bc = sweep_cases(bdir)
-        key, label = BEYOND[name]
+        key, label, log = BEYOND[name]
         late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
                  "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in bc]
         numbers["beyond"][name] = {
             "cases": len(bc), "n": bc[0]["scene"].data["chain"]["n"] if bc else None,
             "fig7": pf.fig7(late, figs / f"beyond-{name}.png", "segments starting at t >= T_c/2",
-                            color_key=key, color_label=label, title=name),
+                            color_key=key, color_label=label, title=name, log_color=log),
             "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
             "max_ledger_error": max((c["ledger_error"] for c in bc), default=None)}
     _atomic_write(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
