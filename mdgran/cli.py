@@ -148,7 +148,8 @@ def cmd_sweep(args) -> int:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
     overrides = [parse_override(s) for s in (args.set or [])]
     res = run_sweep(args.sweep, args.out, workers=args.workers, executor=args.executor,
-                    overrides=overrides, progress=not args.quiet, small=args.small)
+                    overrides=overrides, progress=not args.quiet, small=args.small,
+                    backend=args.backend)
     failed = [r for r in res if r["status"] != "complete"]
     print(f"{args.sweep}: {len(res) - len(failed)} of {len(res)} cases complete in {args.out}")
     for r in failed:
@@ -230,6 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="parallel processes (default: all cores)")
     s.add_argument("--executor", default="process", help="process (default) | mpi")
     s.add_argument("--small", action="store_true", help="the sweep's small (CI) version")
+    s.add_argument("--backend", default=None,
+                   help="backend of every case (default: the sweep file's, usually reference)")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene key in every case")
     s.add_argument("--quiet", action="store_true", help="no progress lines")

@@ -96,7 +96,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     sdir = Path(sweep_dir) if sweep_dir is not None else out / "sweep"
     if sweep_dir is None:
         run_sweep(sweep, sdir, workers=workers or (os.cpu_count() or 1), small=small,
-                  progress=progress)
+                  progress=progress, backend=backend)
     say("analysing the sweep cases")
     cases = sweep_cases(sdir)
     say("drawing figures")
@@ -128,7 +128,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     for name in beyond:
         bdir = out / "beyond" / name
         run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
-                  progress=progress)
+                  progress=progress, backend=backend)
         bc = sweep_cases(bdir)
         key, label, log = BEYOND[name]
         late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],

@@ -152,12 +152,27 @@ def _executor(kind: str, workers: int):
 
 
 def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
-              overrides=(), progress=True, stream=None, small: bool = False) -> list:
+              overrides=(), progress=True, stream=None, small: bool = False,
+              backend: str | None = None) -> list:
     """Run every unfinished case of ``spec``; returns all case summaries (finished ones read
-    back from disk), sorted by case index."""
+    back from disk), sorted by case index.  ``backend`` replaces the spec's backend; a folder
+    holds one sweep on one backend, so resuming it on another is refused."""
+    from .backends import BACKENDS
+
     stream = stream or sys.stderr
     sweep = load_sweep(spec, overrides, small)
+    if backend is not None:
+        if backend not in BACKENDS:
+            raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not "
+                             f"{backend!r}")
+        sweep["backend"] = backend
     out = Path(out_dir)
+    if (out / "sweep.json").exists():
+        before = json.loads((out / "sweep.json").read_text())
+        if before.get("backend") != sweep["backend"] or before.get("cases") != json.loads(
+                json.dumps(sweep["cases"])):
+            raise SceneError("--out", f"{out} holds another sweep (or the same on backend "
+                             f"{before.get('backend')!r}); use a new folder")
     (out / "cases").mkdir(parents=True, exist_ok=True)
     for stale in (out / "cases").glob("*.tmp-*"):  # left by a killed sweep (one sweep per DIR)
         stale.unlink()

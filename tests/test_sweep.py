@@ -51,3 +51,22 @@ def test_killed_sweep_resumes_without_redoing(tmp_path):
     for r in res:
         assert json.loads((out / "cases" / f"{r['index']:04d}.json").read_text())["status"] \
             == "complete"
+
+
+def test_sweep_on_another_backend_and_no_mixing(tmp_path, capsys):
+    """--backend runs every case on the fast backend; resuming that folder on another backend
+    is refused (exit 2, one line), so a sweep's cases never mix backends."""
+    from mdgran.cli import main
+
+    out = tmp_path / "s"
+    args = ["sweep", "paper-robustness", "--small", "--quiet", "--workers", "2", "--out", str(out)]
+    assert main(args + ["--backend", "fast"]) == 0
+    spec = json.loads((out / "sweep.json").read_text())
+    assert spec["backend"] == "fast"
+    from mdgran.trajectory import read_h5
+
+    assert read_h5(out / "cases" / "0000.h5").backend == "fast"
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0]
