@@ -47,8 +47,8 @@ SCENES = {"micro-star": (400.0, 20.0), "macro-hertz": (400.0, 50.0),
           "collision-pair": (20.0, 20.0)}
 SETTINGS = {
     "reference": ("run.tolerance", [1e-5, 1e-6, 1e-7, 1e-8, 1e-9]),
-    "fast": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
-    "verlet": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
+    "fast": ("run.dt", [0.005, 0.0025, 0.00125, 0.000625, 0.0003125]),
+    "verlet": ("run.dt", [0.005, 0.0025, 0.00125, 0.000625, 0.0003125]),
     "lammps": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
 }
 BACKEND = {"reference": ("reference", {}), "fast": ("fast", {}),

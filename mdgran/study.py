@@ -72,6 +72,13 @@ def sweep_cases(sweep_dir: Path) -> list:
     return cases
 
 
+def _folder_backend(folder: Path, backend: str) -> str:
+    """A sweep folder that exists keeps the backend it was started on (a chain-1000 sweep run
+    with ``mdgran sweep --backend fast`` is resumed and analysed as such)."""
+    f = folder / "sweep.json"
+    return json.loads(f.read_text())["backend"] if f.exists() else backend
+
+
 def _fmt(x, spec=".3g"):
     return "-" if x is None else format(x, spec)
 
@@ -96,7 +103,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     sdir = Path(sweep_dir) if sweep_dir is not None else out / "sweep"
     if sweep_dir is None:
         run_sweep(sweep, sdir, workers=workers or (os.cpu_count() or 1), small=small,
-                  progress=progress, backend=backend)
+                  progress=progress, backend=_folder_backend(sdir, backend))
     say("analysing the sweep cases")
     cases = sweep_cases(sdir)
     say("drawing figures")
@@ -128,7 +135,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     for name in beyond:
         bdir = out / "beyond" / name
         run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
-                  progress=progress, backend=backend)
+                  progress=progress, backend=_folder_backend(bdir, backend))
         bc = sweep_cases(bdir)
         key, label, log = BEYOND[name]
         late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
@@ -138,7 +145,8 @@ def make_report(out, small: bool = False, workers: int | None = None,
             "fig7": pf.fig7(late, figs / f"beyond-{name}.png", "segments starting at t >= T_c/2",
                             color_key=key, color_label=label, title=name, log_color=log),
             "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
-            "max_ledger_error": max((c["ledger_error"] for c in bc), default=None)}
+            "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
+            "backend": _folder_backend(bdir, backend)}
     _atomic_write(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
     _atomic_write(out / "report.md", markdown(numbers, cases, small))
     say(f"report: {out / 'report.md'}")
@@ -331,9 +339,9 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
               "The same measures on longer chains and over the adhesion parameter lambda "
               "(representative segment after the impact transient; coincidence window T_c/4, "
               "pooled over each sweep's cases):", "",
-              "| sweep | beads | cases | Fig. 7 slope (95% CI) | Spearman rho (p) | C_eff peaks "
-              "near a rate peak | shifted | p | max ledger error |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "| sweep | beads | backend | cases | Fig. 7 slope (95% CI) | Spearman rho (p) | "
+              "C_eff peaks near a rate peak | shifted | p | max ledger error |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
         for name, b in nb["beyond"].items():
             f, co = b["fig7"], b["coincidence_pooled"]
             fit = (f"{f['slope']:.3g} ({f['slope_ci95'][0]:.3g} to {f['slope_ci95'][1]:.3g})"
@@ -341,7 +349,7 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
             rho = f"{f['spearman_rho']:.2f} ({f['spearman_p']:.2g})" if "slope" in f else "-"
             cof = (f"{co['fraction']:.3f} | {co['null_mean']:.3f} +- {co['null_std']:.3f} | "
                    f"{co['p_value']:.3g}" if co.get("cases") else "- | - | -")
-            L.append(f"| {name} | {b['n']} | {b['cases']} | {fit} | {rho} | {cof} | "
+            L.append(f"| {name} | {b['n']} | {b['backend']} | {b['cases']} | {fit} | {rho} | {cof} | "
                      f"{_fmt(b['max_ledger_error'])} |")
         L.append("")
         L += [f"![{name}](figures/beyond-{name}.png)" for name in nb["beyond"]]
