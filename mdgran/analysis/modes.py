@@ -107,3 +107,25 @@ def cluster_modes_in_run(traj, scene, cluster, t0: float, t1: float):
     om, sh = cluster_modes(model.law, comp, model.k1, cluster.left_wall, cluster.right_wall,
                            model.k3, x)
     return om, sh, comp
+
+
+def damped_impulse_response(n: int, k0: float, k1: float, c: float, v0: float, bead: int,
+                            t) -> np.ndarray:
+    """Analytic motion of a chain of ``n`` beads between walls, every contact linear with
+    stiffness ``k0`` and unilateral damping ``c`` (both contacts closed throughout), substrate
+    ``k1``, after an impulse ``v0`` on ``bead`` (1-based), at times ``t`` [F]: ``x`` [F, n].
+
+    With L the wall-to-wall Laplacian, K = k0 L + k1 I and C = c L commute: mode ``j`` has
+    ``w_j^2 = k1 + k0 lam_j`` and decay rate ``c lam_j / 2``, ``lam_j = 4 sin^2(j pi/(2(n+1)))``,
+    shapes ``sqrt(2/(n+1)) sin(i j pi / (n+1))``.  This is the linear limit of a tiny impulse
+    (hard/tiny), with ``k0`` the law's stiffness at ``delta = 0``.
+    """
+    j = np.arange(1, n + 1)
+    phi = np.sqrt(2.0 / (n + 1)) * np.sin(np.outer(np.arange(1, n + 1), j) * np.pi / (n + 1))
+    lam = 4 * np.sin(j * np.pi / (2 * (n + 1))) ** 2
+    w2 = k1 + k0 * lam
+    gam = 0.5 * c * lam
+    wd = np.sqrt(w2 - gam**2)
+    q0dot = phi[bead - 1, :] * v0
+    tt = np.asarray(t, float)[:, None]
+    return (q0dot / wd * np.exp(-gam * tt) * np.sin(wd * tt)) @ phi.T
