@@ -155,6 +155,9 @@ def plot(results, path):
                           "o-", label=lab)
             if row == 1:
                 ax.axhline(TARGET_LEDGER, color="k", ls=":", lw=1)
+            from matplotlib.ticker import NullFormatter
+
+            ax.xaxis.set_minor_formatter(NullFormatter())  # overlapping minor labels
             ax.set(xlabel="wall time of the run (s, median)", ylabel=label,
                    title=f"{res['scene']} to t = {res['duration']:g}")
             ax.legend(fontsize=7)
@@ -168,7 +171,13 @@ def main(argv=None):
     ap.add_argument("--methods", default=",".join(SETTINGS))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="short runs, three settings each")
+    ap.add_argument("--plot-only", action="store_true",
+                    help="redraw the PNG from the JSON of the last run")
     args = ap.parse_args(argv)
+    if args.plot_only:
+        stem = "work_precision_quick" if args.quick else "work_precision"
+        saved = json.loads((RESULTS / f"{stem}.json").read_text())
+        return plot(saved["results"], RESULTS / f"{stem}.png")
     methods = args.methods.split(",")
     results = [measure_scene(s, methods, args.repeat, args.quick) for s in args.scenes.split(",")]
     out = {"target_ledger_error": TARGET_LEDGER, "truth_tolerance": TRUTH_TOL,
