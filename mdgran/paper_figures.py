@@ -172,7 +172,10 @@ def fig3(traj, scene, path) -> dict:
         rows.append({"cluster": roman[k], "beads": [c.first, c.last], "walls":
                      [c.left_wall, c.right_wall], "t": [t0, t1], "omega_1": float(omega[0]),
                      "omega_2": float(omega[1]), "wavelet_ridge_median": mean_ridge})
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    fig.text(0.5, 0.005, "wavelet amplitude of the middle bead's velocity; white lines: the "
+             "cluster's first (dashed) and second (dotted) linearized frequencies",
+             ha="center", fontsize=9)
     _save(fig, path)
     return {"clusters": rows}
 
