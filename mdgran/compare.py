@@ -47,7 +47,6 @@ Criteria (each with threshold and measured value in the report; exit status 3 wh
 """
 from __future__ import annotations
 
-import json
 import math
 import time as _time
 from dataclasses import asdict, dataclass
@@ -291,10 +290,9 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
                           f"flicker dropped over the run: {drop_a} and {drop_b}"
                           + ("" if ev["disagreement"] is None else
                              f"; first disagreement: {ev['disagreement']}")))
-    m = ev["matched"]
     whole_a = list(zip(ref.nominal.ev_contact.tolist(), ref.nominal.ev_kind.tolist()))
     whole_b = list(zip(other.nominal.ev_contact.tolist(), other.nominal.ev_kind.tolist()))
-    info = {"horizon": th, "max_event_time_offset": offset, "events_compared": m,
+    info = {"horizon": th, "max_event_time_offset": offset, "events_compared": ev["matched"],
             "events_whole_run": [len(whole_a), len(whole_b)],
             "whole_run_sequence_identical": whole_a == whole_b}
     return crit, info

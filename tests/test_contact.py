@@ -1,5 +1,4 @@
 """Contact laws against the independent check table of physics.md and analytic identities."""
-import math
 
 import numpy as np
 import pytest

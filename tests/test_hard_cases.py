@@ -10,7 +10,6 @@ import os
 import numpy as np
 import pytest
 
-from mdgran.contact import ContactLaw
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 

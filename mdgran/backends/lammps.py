@@ -30,7 +30,6 @@ substrate term when the scene has one) is a Python callback of ``fix external pf
 """
 from __future__ import annotations
 
-import math
 import time as _time
 from pathlib import Path
 

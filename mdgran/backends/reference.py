@@ -35,7 +35,6 @@ the displacement rule that is the loop energy ``W``, to the accuracy of the even
 """
 from __future__ import annotations
 
-import math
 import time as _time
 
 import numpy as np
