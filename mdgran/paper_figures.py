@@ -242,7 +242,7 @@ def fig5(traj, scene, path) -> dict:
 def _grid_axes(plt, k1s, v0s, size=(1.5, 1.1)):
     fig, axs = plt.subplots(len(v0s), len(k1s), figsize=(size[0] * len(k1s) + 1.2,
                                                          size[1] * len(v0s) + 1.0),
-                            sharex=True, sharey=True, squeeze=False)
+                            sharex=False, sharey=True, squeeze=False)
     return fig, axs
 
 
@@ -294,7 +294,8 @@ def fig_b(cases, paths) -> dict:
             a = f[1][i, j]
             a.tick_params(labelsize=6)
             a.set(xlabel="", ylabel="", title="")
-    titles = ["B1: kinetic energy maps (bead vs time / T_c)",
+    titles = ["B1: kinetic energy maps (bead vs time / T_c; each case to t = 400, i.e. to a "
+              "different number of its own T_c)",
               "B2: C_eff / C_+ (0-100) against time / T_c (shaded: representative segment, "
               "t >= T_c/2)",
               "B3: smoothed re-clustering rate against time / T_c"]
