@@ -38,9 +38,12 @@ def test_report_small(tmp_path):
     data = json.loads((out / "report.json").read_text())
     assert data["beyond"]["lambda-range"]["cases"] == 2
     assert data["sweep"]["cases"] == 4 and data["sweep"]["max_ledger_error"] < 1e-8
-    # micro-star's kinetic energy falls below 1/10 of T(0) earlier than macro-hertz's
+    # during re-clustering micro-star's kinetic energy is below macro-hertz's (the paper's
+    # Fig. 2c; measured 0.12 vs 0.205 of T(0) at 3 T_c, running mean over one T_c)
     d = nb["decay"]
-    assert d["micro"]["decay_10pct_over_T_c"] < d["macro"]["decay_10pct_over_T_c"]
+    at = "3"
+    assert d["micro"]["T_over_T0_at_multiples_of_T_c"][at] < \
+        0.8 * d["macro"]["T_over_T0_at_multiples_of_T_c"][at]
     # a second call reuses the runs and the sweep (only redraws), through the command line
     before = (out / "runs" / "micro-star.h5").stat().st_mtime_ns
     assert main(["report", str(out), "--small", "--quiet"]) == 0
