@@ -239,10 +239,10 @@ def fig5(traj, scene, path) -> dict:
 
 
 # ---- Fig. 6 and B1-B3: the sweep grid ----------------------------------------------------------
-def _grid_axes(plt, k1s, v0s, size=(1.5, 1.1)):
+def _grid_axes(plt, k1s, v0s, size=(1.5, 1.1), sharey=True):
     fig, axs = plt.subplots(len(v0s), len(k1s), figsize=(size[0] * len(k1s) + 1.2,
                                                          size[1] * len(v0s) + 1.0),
-                            sharex=False, sharey=True, squeeze=False)
+                            sharex=False, sharey=sharey, squeeze=False)
     return fig, axs
 
 
@@ -275,7 +275,8 @@ def fig_b(cases, paths) -> dict:
     plt = _plt()
     k1s = sorted({c["k1"] for c in cases})
     v0s = sorted({c["v0"] for c in cases})
-    figs = [_grid_axes(plt, k1s, v0s) for _ in range(3)]
+    # B3's rates grow ~100x from the weakest to the strongest impulse: one scale per row
+    figs = [_grid_axes(plt, k1s, v0s, sharey=share) for share in (True, True, "row")]
     for c in cases:
         i, j = v0s.index(c["v0"]), k1s.index(c["k1"])
         tr, sc = c["traj"](), c["scene"]
@@ -298,7 +299,8 @@ def fig_b(cases, paths) -> dict:
               "different number of its own T_c)",
               "B2: C_eff / C_+ (0-100) against time / T_c (shaded: representative segment, "
               "t >= T_c/2)",
-              "B3: smoothed re-clustering rate against time / T_c"]
+              "B3: smoothed re-clustering rate (clusters per time unit; one scale per row) "
+              "against time / T_c"]
     for (fig, axs), title, path in zip(figs, titles, paths):
         for j, k in enumerate(k1s):
             axs[0, j].set_title(f"K1 = {k:g} N/m", fontsize=7)
@@ -365,7 +367,7 @@ def fig7(cases, path, rule: str = "", color_key: str = "k1",
         ax.plot(xx, fit["intercept"] + fit["slope"] * xx, "k--", lw=1.2,
                 label=f"slope {fit['slope']:.3g}, 95% CI [{fit['slope_ci95'][0]:.3g}, "
                       f"{fit['slope_ci95'][1]:.3g}], n = {fit['n']}")
-    ax.legend(fontsize=8, loc="upper left", labelspacing=1.2)
+    ax.legend(fontsize=8, loc="best", labelspacing=1.2, framealpha=0.8)
     ax.set(xlabel="log10 re-clustering rate of the segment (clusters per time unit)",
            ylabel="max segment-mean C_eff / C_+",
            title=f"{title}: representative segment of each case (size: impulse energy)\n{rule}")
