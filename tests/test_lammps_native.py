@@ -11,11 +11,6 @@ import pytest
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 
-lammps_env = pytest.importorskip("mdgran.lammps_env")
-try:
-    lammps_env.check_available()
-except lammps_env.LammpsUnavailable as exc:  # pragma: no cover - CI installs it
-    pytest.skip(str(exc), allow_module_level=True)
 
 from mdgran import native_lammps as nl  # noqa: E402
 
