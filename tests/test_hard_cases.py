@@ -70,16 +70,22 @@ def test_tiny_impulse_matches_damped_normal_modes():
     assert np.abs(tr.x - x).max() < 1e-4 * np.abs(x).max()
 
 
+#: measured max ledger error of hard/undamped-long on the reference (tol 1e-8), relative to the
+#: energy scale: 4.7e-9 to t = 400; 2.0e-8, 4.6e-7, 5.6e-6 to t = 1e3, 1e4, 1e5 (a linear drift
+#: of 5.6e-11 per time unit once established; 8.6 minutes for 1e5); bounds with a factor 2 margin
+UNDAMPED_BOUND = {400.0: 1e-8, 1e5: 1.2e-5}
+
+
 def test_undamped_long_run_energy_drift():
-    """No damping: the ledger error of the (non-symplectic) reference grows linearly in time;
-    measured 2.7e-11 of the energy scale per time unit at tol 1e-8 (5.4e-8 over 2000).  The
-    pass condition is that rate, with a factor 2 margin."""
+    """No damping: the ledger error of the (non-symplectic) reference grows linearly in time
+    and must stay within the measured rate (a growing drift would be a bookkeeping error).
+    MDGRAN_FULL=1 runs the 1e5 time units of the issue (about 8 minutes)."""
     duration = 1e5 if FULL else 400.0
     sc = load_scene("hard/undamped-long", [("run.duration", duration)])
     res = run(sc, "reference")
     drift = ledger_rel(res, sc)
     print(f"undamped drift over {duration:g}: {drift:.2e} of the energy scale")
-    assert drift < 6e-11 * max(duration, 400.0)
+    assert drift < UNDAMPED_BOUND[duration]
 
 
 @pytest.mark.skipif(not FULL, reason="1e5 beads: about a minute; MDGRAN_FULL=1 runs it")
