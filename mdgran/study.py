@@ -67,6 +67,8 @@ def sweep_cases(sweep_dir: Path) -> list:
                "traj": (lambda path=h5: read_h5(path))}
         tr = row["traj"]()
         row.update(an.run_summary(tr, scene))
+        cbar = an.effective_damping(tr, scene)  # kept for the pooled coincidence test
+        row["curves"] = (tr.time, cbar, an.analyze_reclustering(tr, scene, cbar).rate)
         row["ledger_error"] = float(np.max(np.abs(tr.ledger_error(scene.impulse_energy or 1.0))))
         row["status"] = tr.attrs.get("status", "complete")
         cases.append(row)
@@ -218,20 +220,20 @@ def pooled_coincidence(cases, window_frac: float = 1.0, prominence: float = 0.1,
     rng = np.random.default_rng(seed)
     per_case = []
     for c in cases:
-        tr, sc = c["traj"](), c["scene"]
-        tc = an.characteristic_period(tr)
-        if not np.isfinite(tc):
+        time, cbar, rate = c["curves"]
+        tc = c.get("characteristic_period")
+        if tc is None or not np.isfinite(tc):
             continue
-        t0, t1 = float(tr.time[0]), float(tr.time[-1])
+        t0, t1 = float(time[0]), float(time[-1])
         if active:
             last = c.get("last_reclustering_time")
             if last is None:
                 continue
             t1 = min(t1, last + tc)
-        co = an.run_coincidence(tr, sc, window=window_frac * tc, prominence=prominence,
-                                n_shifts=1, t_range=(t0, t1))
-        if len(co["c_eff_peaks"]) and len(co["rate_peaks"]):
-            per_case.append((co["c_eff_peaks"], co["rate_peaks"], window_frac * tc, t0, t1))
+        a = an.peak_times(time, cbar, prominence, (t0, t1))
+        b = an.peak_times(time, rate, prominence, (t0, t1))
+        if len(a) and len(b):
+            per_case.append((a, b, window_frac * tc, t0, t1))
 
     def hits(shift):
         total = 0
