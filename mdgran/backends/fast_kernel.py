@@ -296,33 +296,32 @@ def sweep(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, sc, ev
                     flags[nflag] = j
                 nflag += 1
         if rb >= 1:  # finish the left bead
-            a = f_l - f_r
-            av = fv_l - fv_r
-            if k1_on:
-                a -= k1 * x_c
-                av -= k1 * x_c
-            if k3_on:
-                a -= k3 * x_c * x_c * x_c
-                av -= k3 * x_c * x_c * x_c
+            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, k1_on, k1, k3_on, k3)
             xn[rb - 1] = x_c
             an[rb - 1] = a
             vn[rb - 1] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls:  # the last bead has no contact on its right
-        a = f_l
-        av = fv_l
-        if k1_on:
-            a -= k1 * x_c
-            av -= k1 * x_c
-        if k3_on:
-            a -= k3 * x_c * x_c * x_c
-            av -= k3 * x_c * x_c * x_c
+        a, av = bead_accelerations(f_l, fv_l, x_c, k1_on, k1, k3_on, k3)
         xn[n - 1] = x_c
         an[n - 1] = a
         vn[n - 1] = vh_c + hh * av
     st[ST_NFLAG] = nflag
     return power
+
+
+@njit(cache=True, inline="always")
+def bead_accelerations(f, fv, x, k1_on, k1, k3_on, k3):
+    """A bead's acceleration from its net contact force ``f`` (and ``fv``, the same with the
+    mean-force kick near snap-off) plus the substrate terms the scene switches on."""
+    if k1_on:
+        f -= k1 * x
+        fv -= k1 * x
+    if k3_on:
+        f -= k3 * x * x * x
+        fv -= k3 * x * x * x
+    return f, fv
 
 
 @njit(cache=True)
