@@ -71,6 +71,9 @@ N_PR = 16
 MAX_SWITCHES = 4  # switches of one contact at one instant before the run stops (chatter)
 MAX_SUBSTEPS = 10000  # event splits in one step
 SIMULTANEOUS = 1e-12  # events within SIMULTANEOUS * (1 + t) of the earliest switch with it
+#: The state invariant (as the reference's): no contact beyond its switching point by more
+#: than this (units of p) after a step; one found beyond it switches at once.
+STATE_TOL = 1e-12
 FLAG_CAP = 64  # flagged contacts remembered per pass (beyond: all contacts are scanned)
 CHAT_CAP = 64
 #: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
@@ -351,7 +354,7 @@ def first_root(walls, j, xo, vo, ao, xn, closed, h, pr):
     d1 = diff(walls, xn, j) - pr[PR_GAP]
     g1 = d1 - pr[PR_DOFF] if closed[j] else -d1
     if g0 <= 0.0:  # on its switching point (left alone: moving inward): event if it goes out
-        if b < 0.0:
+        if b < 0.0 or g0 < -STATE_TOL:  # moving out, or beyond it (the state invariant)
             return 0.0
         if c < 0.0 and -b / c <= h:
             return -b / c
@@ -461,13 +464,14 @@ def switch(cfg, j, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat):
 @njit(cache=True)
 def settle(cfg, js, nj, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat):
     """Switch at once every contact of js[:nj] on or over its switching point and moving
-    outward (g <= 0, g' < 0), until none is (the reference's rule)."""
+    outward (g <= 0, g' < 0), or beyond it by more than STATE_TOL, until none is (the
+    reference's rule)."""
     while True:
         moved = False
         for k in range(nj):
             j = js[k]
             g, gd, _ = gfun(cfg[0], j, x, v, a, closed, pr)
-            if g <= 0.0 and gd < 0.0:
+            if g < -STATE_TOL or (g <= 0.0 and gd < 0.0):
                 switch(cfg, j, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat)
                 moved = True
                 if st[ST_STATUS] != OK:

@@ -30,6 +30,13 @@ candidate again only if it ends a step further outside than it started.  A conta
 switch more than ``MAX_SWITCHES_AT_ONE_INSTANT`` times without time advancing is a modelling
 dead end (Zeno chatter): the run stops with :class:`IntegrationError`, naming the contact.
 
+**The state invariant.**  After every accepted step and at every frame, no closed contact lies
+below its switching point and no open one past contact by more than ``STATE_TOL`` (1e-12 p):
+a step that ends with a contact outside its state (its root within the simultaneity window of
+the step end, or an event landing on an output time with ``g`` at -1e-16) stops the solver
+there and the contact switches at once (:meth:`_settle`), so no segment starts from a violated
+state.  Inside ``[-STATE_TOL, 0]`` the switching policy above decides (DMT chatter guard).
+
 **Ledger.**  On opening, the contact's energy ``V(delta(t_e))`` goes to ``D_hysteresis``; for
 the displacement rule that is the loop energy ``W``, to the accuracy of the event location.
 """
@@ -47,6 +54,10 @@ MAX_SWITCHES_AT_ONE_INSTANT = 4
 SIMULTANEOUS = 1e-12
 #: A pending contact switches when its event function is at most this (units of p).
 EVENT_G_TOL = 1e-13
+#: The state invariant: after every accepted step and at every frame, no closed contact lies
+#: below its switching point (``delta < delta_off``) and no open one past contact (``delta >
+#: 0``) by more than this (units of p); a contact found beyond it is switched at once.
+STATE_TOL = 1e-12
 #: Tolerance factor for steps that approach a snap-off (see ``_near_snap_off``) and for the
 #: redone step that ends on an event.
 EVENT_TIGHTEN = 1e-3
@@ -176,14 +187,25 @@ class ReferenceBackend(Backend):
                 events.append(Event(t, int(nums[k]), CLOSE))
         self.stats["events"] += len(ks)
 
-    def _settle(self, t, y, events):
-        """Switch at once every contact on or over its switching point moving outward."""
+    @staticmethod
+    def _outside(g, gd):
+        """Contacts that must switch now: beyond their switching point by more than
+        ``STATE_TOL`` (the state invariant), or on or over it and moving outward."""
+        return (g < -STATE_TOL) | ((g <= 0.0) & (gd < 0.0))
+
+    def _settle(self, t, y, events) -> int:
+        """Switch at once every contact that is :meth:`_outside` its state; returns how many
+        switches were made.  This is what keeps the state invariant: it runs after every
+        event, at every accepted step that ends with a contact outside, and before every
+        frame, so a violation is never carried into the next step."""
         count = {}
+        switched = 0
         while True:
             g, gd = self._g(y, self._closed)
-            ks = np.flatnonzero((g <= 0.0) & (gd < 0.0))
+            ks = np.flatnonzero(self._outside(g, gd))
             if ks.size == 0:
-                return
+                return switched
+            switched += ks.size
             for k in ks:
                 count[k] = count.get(k, 0) + 1
                 if count[k] > MAX_SWITCHES_AT_ONE_INSTANT:
@@ -275,11 +297,14 @@ class ReferenceBackend(Backend):
                         if cands:
                             te = min(c[0] for c in cands)
                             if te < t1 - SIMULTANEOUS * (1.0 + abs(t1)):
-                                ks = {k for tc, k in cands
+                                ks = {k: bool(self._closed[k]) for tc, k in cands
                                       if tc <= te + SIMULTANEOUS * (1.0 + abs(te))}
                                 restart = (t0, y0, te, ks)
                                 h_last = max(te - t0, 1e-3 * (solver.step_size or 1.0))
                                 break
+                    if np.any(self._outside(g1, gd1)):
+                        break  # accepted with a contact outside (a root within SIMULTANEOUS
+                        # of the step end, or over its point): switch it there, below
                     g0, gd0 = g1, gd1
                     armed_out &= g1 <= 0.0
                     if not tight and self._near_snap_off(g1, gd1, solver.h_abs):
@@ -289,7 +314,11 @@ class ReferenceBackend(Backend):
                 if restart is None:
                     t, y = solver.t, solver.y.copy()
                     h_last = getattr(solver, "h_abs", None) or solver.step_size or h_last
-                    if accept_and_tighten:
+                    if self._settle(t, y, events):
+                        armed_out = self._g(y, self._closed)[0] <= 0.0
+                        rhs = self._rhs_factory(self._closed.copy())
+                        post_event = True
+                    if accept_and_tighten or t < target:
                         continue
             if restart is not None:
                 t, y, target, pending = restart
@@ -303,8 +332,13 @@ class ReferenceBackend(Backend):
                     break
                 target = float(out_times[i_out])
                 continue
+            # the pending contacts still in the state they were located in (a settle on the
+            # way may have switched them already)
+            ks = sorted(k for k, was_closed in pending.items() if self._closed[k] == was_closed)
+            if not ks:
+                target, pending = float(out_times[i_out]), None
+                continue
             g, gd = self._g(y, self._closed)
-            ks = sorted(pending)
             short = [k for k in ks if g[k] > EVENT_G_TOL and gd[k] < 0.0]
             if short and (max(g[k] / -gd[k] for k in short) > 4e-16 * max(1.0, abs(t))):
                 target = min(float(out_times[i_out]), t + max(g[k] / -gd[k] for k in short))
