@@ -16,12 +16,13 @@ import numpy as np
 from .chain import model_from_scene
 
 
-def contact_states(traj, n_contacts: int, numbers) -> np.ndarray:
-    """[F, n_contacts] bool: every contact closed at t = 0, then the events replayed; a frame
-    at time t includes the events at times <= t."""
-    index = {int(c): k for k, c in enumerate(numbers)}
-    states = np.empty((len(traj.time), n_contacts), dtype=bool)
-    cur = np.ones(n_contacts, dtype=bool)
+def contact_states(traj, model) -> np.ndarray:
+    """[F, n_contacts] bool: the model's initial states (all closed, or all open with an
+    initial gap), then the events replayed (the t = 0 settle included); a frame at time t
+    includes the events at times <= t."""
+    index = {int(c): k for k, c in enumerate(model.contact_numbers)}
+    states = np.empty((len(traj.time), model.n_contacts), dtype=bool)
+    cur = model.initial_state(1, 0.0)[2].copy()
     j = 0
     for f, t in enumerate(traj.time):
         while j < len(traj.ev_time) and traj.ev_time[j] <= t:
@@ -49,7 +50,7 @@ def paper_wire_k3(scene) -> float | None:
 def term_budget(traj, scene) -> dict:
     m = model_from_scene(scene)
     e_imp = scene.impulse_energy or 1.0
-    closed = contact_states(traj, m.n_contacts, m.contact_numbers)
+    closed = contact_states(traj, m)
     x, v = traj.x, traj.v
     f_law = np.zeros(len(traj.time))
     f_damp = np.zeros(len(traj.time))

@@ -2,8 +2,10 @@
 
 Exit status: 0 success; 3 a comparison whose verdict fails; 2 bad input (one line on stderr naming the key and what is allowed,
 no traceback, no output file); 1 a failure during a run (the output file is written first,
-with every frame so far and its ``status`` attribute saying what failed).  Heavy imports are
-done inside the subcommands so that ``mdgran scenes`` starts fast.
+with every frame so far and its ``status`` attribute saying what failed), including a run
+whose energy-ledger error exceeds its backend's declared bound (status ``ledger-exceeded: ...``,
+one line on stderr; every frame is in the file) and a sweep with any case not complete.
+Heavy imports are done inside the subcommands so that ``mdgran scenes`` starts fast.
 """
 from __future__ import annotations
 
@@ -91,7 +93,7 @@ def cmd_info(args) -> int:
 
 def cmd_run(args) -> int:
     from .backends.base import IntegrationError
-    from .simulation import run
+    from .simulation import LEDGER_EXCEEDED, run
 
     scene = _load(args)
     small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
@@ -110,12 +112,15 @@ def cmd_run(args) -> int:
         st = res.stats
         print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
               f"{st.get('events', '?')} events, wall {st.get('wall_time_s', float('nan')):.2f} s, "
-              f"ledger error {res.max_ledger_error:.2e} of E_imp")
+              f"ledger error {res.max_ledger_error:.2e} of E_imp (bound {res.ledger_bound:.2e})")
         if res.trajectory is not None:
             from .budget import format_budget, term_budget
 
             print("term budget (which force terms this scene needs):")
             print(format_budget(term_budget(res.trajectory, scene)))
+    if res.status.startswith(LEDGER_EXCEEDED):
+        return _fail(f"{res.status}; {args.out} holds every frame and says so in "
+                     "/parameters@status", 1)
     return 0
 
 
@@ -142,7 +147,7 @@ def cmd_compare(args) -> int:
 
 def cmd_sweep(args) -> int:
     from .scene import parse_override
-    from .sweep import run_sweep
+    from .sweep import run_sweep, sweep_summary
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
@@ -150,11 +155,14 @@ def cmd_sweep(args) -> int:
     res = run_sweep(args.sweep, args.out, workers=args.workers, executor=args.executor,
                     overrides=overrides, progress=not args.quiet, small=args.small,
                     backend=args.backend)
-    failed = [r for r in res if r["status"] != "complete"]
-    print(f"{args.sweep}: {len(res) - len(failed)} of {len(res)} cases complete in {args.out}")
-    for r in failed:
+    summ = sweep_summary(res)
+    bad = summ["ledger_exceeded"] + summ["failed"]
+    print(f"{args.sweep}: {summ['complete']} of {summ['cases']} cases complete in {args.out}"
+          + (f"; {len(summ['ledger_exceeded'])} exceeded their ledger bound, "
+             f"{len(summ['failed'])} failed" if bad else ""))
+    for r in bad:
         print(f"  case {r['index']:04d} {r['params']}: {r['status']}")
-    return 1 if failed else 0
+    return 1 if bad else 0
 
 
 def cmd_report(args) -> int:

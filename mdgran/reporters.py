@@ -2,7 +2,8 @@
 
 The driver (:func:`mdgran.simulation.run`) hands every frame and its ledger to each reporter's
 ``report(frame, ledger)``, and calls ``close(status)`` once at the end (``status`` is
-``"complete"`` or ``"failed: ..."``, or ``"interrupted"``).
+``"complete"``, ``"ledger-exceeded: ..."`` (the ledger error is above the backend's declared
+bound), ``"failed: ..."``, or ``"interrupted"``).
 
 * :class:`H5MDWriter` writes the contract's H5MD file atomically: frames go to a temporary
   file beside the target (``NAME.h5.tmp-PID``), renamed onto the requested name only when the
@@ -108,6 +109,7 @@ class H5MDWriter:
         self.resume_state = None
         self.resume_e0 = None
         self.resume_max_error = 0.0
+        self.resume_term_max = 0.0  # largest |ledger term| so far (the round-off floor's scale)
         if resume and self.tmp.exists() and self._has_checkpoint():
             self.f = h5py.File(self.tmp, "r+")
             self._open_existing()
@@ -152,6 +154,8 @@ class H5MDWriter:
         tot = self._series["total_energy"]["value"][()]
         self.resume_e0 = float(tot[0])
         self.resume_max_error = float(np.max(np.abs(tot - tot[0]))) if len(tot) else 0.0
+        self.resume_term_max = max((float(np.max(np.abs(self._series[k]["value"][()])))
+                                    for k in LEDGER_NAMES if len(tot)), default=0.0)
         if self.positions:
             sc = self.scene.scales
             self._pos_scale, self._t_scale = (sc.p * 1e9, sc.time * 1e12) if sc else (1.0, 1.0)

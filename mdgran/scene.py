@@ -176,13 +176,29 @@ class Scene:
         return 0.5 * float(self.data["impulse"]["velocity"]) ** 2
 
     def with_overrides(self, overrides) -> "Scene":
-        data = copy.deepcopy(self.data)
-        for key, value in overrides:
-            _set_key(data, key, value)
-        return Scene(self.name, resolve(data))
+        """This scene with ``(key, value)`` overrides: the same keys and rules as
+        :func:`load_scene`'s."""
+        data = {sec: {k: v for k, v in table.items() if v is not None}
+                for sec, table in copy.deepcopy(self.data).items()}
+        if data["contact"].get("fc") is not None:  # fc was given: lambda is only the default
+            data["contact"].pop("lambda", None)
+        return Scene(self.name, resolve(apply_overrides(data, overrides)))
 
     def to_toml(self) -> str:
         return dump_toml(self.data)
+
+
+def apply_overrides(raw: dict, overrides) -> dict:
+    """Set ``(key, value)`` overrides in unresolved scene data (in place; returned).  An
+    override of one way of giving a value (``contact.fc``/``lambda``, ``X_si``/``X``)
+    replaces the other way."""
+    for key, value in overrides:
+        _set_key(raw, key, value)
+        sec, name = key.split(".")
+        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
+            name[:-3] if name.endswith("_si") else f"{name}_si")
+        raw.get(sec, {}).pop(other, None)
+    return raw
 
 
 def _set_key(data: dict, key: str, value):
@@ -269,14 +285,7 @@ def load_scene(spec: str, overrides=()) -> Scene:
         raw = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SceneError("SCENE", f"{path} is not valid TOML: {exc}") from None
-    for key, value in overrides:
-        _set_key(raw, key, value)
-        # an override of one way of giving a value replaces the other way in the file
-        sec, field_name = key.split(".")
-        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
-            field_name[:-3] if field_name.endswith("_si") else f"{field_name}_si")
-        raw.get(sec, {}).pop(other, None)
-    return Scene(name, resolve(raw))
+    return Scene(name, resolve(apply_overrides(raw, overrides)))
 
 
 def describe(spec: str) -> str:

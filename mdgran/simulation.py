@@ -7,15 +7,25 @@ Example::
     result = run(load_scene("micro-star", [("run.duration", 50.0)]), "reference")
     traj = result.trajectory          # arrays in memory
     print(result.max_ledger_error)    # max |total - E0| / E_imp over the frames
+    print(result.status)              # "complete", "ledger-exceeded: ...", "failed: ..."
+
+A run ends "complete" only if it did not fail and its ledger error is within its backend's
+declared bound (:meth:`~mdgran.backends.base.Backend.ledger_bound`); otherwise its status starts
+with ``LEDGER_EXCEEDED`` and says both numbers.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .backends import BACKENDS, get_backend
 from .backends.base import IntegrationError
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
 from .scene import SceneError
+
+
+#: prefix of the status of a run whose ledger error exceeds its backend's declared bound
+LEDGER_EXCEEDED = "ledger-exceeded: "
 
 
 class BackendUnavailable(RuntimeError):
@@ -29,6 +39,13 @@ class RunResult:
     status: str
     max_ledger_error: float  # relative to the impulse energy (or to |E0| if no impulse)
     error: str | None = None
+    ledger_bound: float = math.inf  # the backend's declared bound, same scale
+
+
+def ledger_status(error: float, bound: float) -> str:
+    """The status of a run whose ledger error exceeds its bound (both relative to E_imp)."""
+    return (f"{LEDGER_EXCEEDED}ledger error {error:.3g} of E_imp exceeds the backend's bound "
+            f"{bound:.3g}")
 
 
 def mpi_rank() -> int:
@@ -58,7 +75,10 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     """Run ``scene`` on ``backend``; write ``out`` (H5MD) if given; return the result.
 
     A failure during the run (:class:`IntegrationError`) closes the output with every frame so
-    far and ``status = "failed: ..."``; it is re-raised when ``raise_errors`` is true.  Ctrl-C
+    far and ``status = "failed: ..."``; it is re-raised when ``raise_errors`` is true.  A run
+    whose ledger error ``max |E - E0| / E_imp`` over the frames exceeds the backend's declared
+    bound (``result.ledger_bound``) ends with ``status = "ledger-exceeded: ..."`` (not raised:
+    its frames are what the backend computed; the status says they are not to be trusted).  Ctrl-C
     removes the partial output and re-raises, unless ``checkpoint_every`` (seconds) is set:
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
     in-memory trajectory then holds only the resumed frames; the file holds all).
@@ -87,6 +107,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     scale = scene.impulse_energy or 1.0
     e0 = writer.resume_e0 if start is not None else None
     max_err = writer.resume_max_error / scale if start is not None else 0.0
+    term_max = writer.resume_term_max if start is not None else 0.0  # largest |ledger term|
     status, err = "complete", None
     try:
         for frame in (b.frames(resume=start) if start is not None else b.frames()):
@@ -97,6 +118,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
                 if not scene.impulse_energy:
                     scale = max(abs(e0), 1.0)
             max_err = max(max_err, abs(led["total_energy"] - e0) / scale)
+            term_max = max(term_max, max(abs(v) for v in led.values()))
             for r in reps:
                 r.report(frame, led)
     except IntegrationError as exc:
@@ -105,12 +127,16 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         for r in reps:
             r.close("interrupted")
         raise
+    bound = b.ledger_bound(scale, term_max)
+    if err is None and not max_err <= bound:  # a NaN error is not within any bound
+        status = ledger_status(max_err, bound)
+    b.stats["max_ledger_error_rel"] = max_err
+    b.stats["ledger_bound_rel"] = bound
     for r in reps:
         r.close(status)
-    b.stats["max_ledger_error_rel"] = max_err
     result = RunResult(
         trajectory=mem.trajectory(scene.to_toml(), b.name) if mem is not None else None,
-        stats=b.stats, status=status, max_ledger_error=max_err, error=err)
+        stats=b.stats, status=status, max_ledger_error=max_err, error=err, ledger_bound=bound)
     if err is not None and raise_errors:
         raise IntegrationError(err)
     return result

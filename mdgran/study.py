@@ -8,7 +8,10 @@ What it does, reusing whatever ``DIR`` already holds (so a second call only redr
    in parallel; ``small`` runs its CI-sized version;
 3. analyses them with :mod:`mdgran.analysis` and draws Figs. 2-7 and B1-B3
    (:mod:`mdgran.paper_figures`) into ``DIR/figures/``;
-4. writes ``DIR/report.md`` (the figures with the numbers they show) and ``DIR/report.json``.
+4. writes ``DIR/report.md`` (the figures with the numbers they show) and ``DIR/report.json``;
+   its "Run status" section names every run and sweep case that is not complete (its ledger
+   error exceeded its backend's declared bound, or it failed): their numbers are in the
+   figures and tables but are not to be trusted.
 """
 from __future__ import annotations
 
@@ -70,9 +73,42 @@ def sweep_cases(sweep_dir: Path) -> list:
         cbar = an.effective_damping(tr, scene)  # kept for the pooled coincidence test
         row["curves"] = (tr.time, cbar, an.analyze_reclustering(tr, scene, cbar).rate)
         row["ledger_error"] = float(np.max(np.abs(tr.ledger_error(scene.impulse_energy or 1.0))))
-        row["status"] = tr.attrs.get("status", "complete")
+        row["status"] = str(tr.attrs.get("status", "unknown (no status in the file)"))
         cases.append(row)
     return cases
+
+
+def not_complete(cases: list) -> list:
+    """Index, parameters and status of the sweep cases whose run is not complete."""
+    return [{"index": c["index"], "params": c["params"], "status": c["status"]}
+            for c in cases if c["status"] != "complete"]
+
+
+def run_status(runs: dict, cases: list) -> dict:
+    """The status of each flagship run (name -> Trajectory) and the sweep's incomplete cases."""
+    return {"runs": {name: str(tr.attrs.get("status", "unknown (no status in the file)"))
+                     for name, tr in runs.items()},
+            "sweep_not_complete": not_complete(cases)}
+
+
+def status_markdown(nb: dict) -> list:
+    """report.md's "Run status" section: which runs and cases exceeded their ledger bound or
+    failed (the incomplete ones of the beyond sweeps too)."""
+    st = nb["status"]
+    bad_runs = {k: v for k, v in st["runs"].items() if v != "complete"}
+    bad = {"the sweep": st["sweep_not_complete"],
+           **{f"beyond/{k}": b["not_complete"] for k, b in nb.get("beyond", {}).items()}}
+    L = ["## Run status", ""]
+    if not bad_runs and not any(bad.values()):
+        return L + ["Every run and sweep case is complete: its energy-ledger error is within its "
+                    "backend's declared bound.", ""]
+    L += ["Not complete (a ledger error above the backend's declared bound, or a failure): "
+          "these runs are in the figures and tables below, but their numbers are not to be "
+          "trusted.", ""]
+    L += [f"* run {k}: {v}" for k, v in bad_runs.items()]
+    for where, rows in bad.items():
+        L += [f"* {where}, case {r['index']:04d} {r['params']}: {r['status']}" for r in rows]
+    return L + [""]
 
 
 def _folder_backend(folder: Path, backend: str) -> str:
@@ -116,6 +152,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
         "fig4": pf.fig4(micro, micro_sc, figs / "fig4.png"),
         "fig5": pf.fig5(micro, micro_sc, figs / "fig5.png"),
     }
+    numbers["status"] = run_status({"micro-star": micro, "macro-hertz": macro}, cases)
     numbers["decay"] = kinetic_decay(micro, micro_sc, macro, macro_sc)
     numbers["coincidence_windows"] = coincidence_windows(micro, micro_sc)
     numbers["smoothing"] = smoothing_sensitivity(micro, micro_sc)
@@ -149,6 +186,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
                             color_key=key, color_label=label, title=name, log_color=log),
             "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
             "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
+            "not_complete": not_complete(bc),
             "backend": _folder_backend(bdir, backend)}
     _atomic_write(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
     _atomic_write(out / "report.md", markdown(numbers, cases, small))
@@ -274,6 +312,7 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
          "All quantities nondimensional (time in 1/q, energy in eta p); time axes in "
          "characteristic periods T_c (the primary pulse's double crossing time: "
          f"micro-star {f2['T_c']['micro']:.3g}, macro-hertz {f2['T_c']['macro']:.3g}).", ""]
+    L += status_markdown(nb)
     if small:
         L += ["**Small version** (the sweep's CI-sized grid): the sweep figures and Fig. 7 "
               "have too few cases to mean anything; run without --small for the study.", ""]

@@ -21,8 +21,11 @@ A sweep file (TOML; built-in ones in ``mdgran/sweeps/``)::
 Every case writes ``DIR/cases/NNNN.h5`` (the run, atomically) and then ``DIR/cases/NNNN.json``
 (its summary, atomically).  A case counts as done when its JSON exists, so a sweep that is
 killed and started again redoes only the unfinished cases.  ``DIR/sweep.json`` lists the
-cases and their parameters.  Cases run in separate processes (``--workers``); the same spec
-runs on a cluster through mpi4py's ``MPIPoolExecutor`` (``--executor mpi``, launched as
+cases and their parameters; ``DIR/summary.json`` (rewritten at the end of every call) counts
+the complete cases and lists the others: those whose ledger error exceeded their backend's
+declared bound (status ``ledger-exceeded: ...``) and those that failed.  Cases run in
+separate processes (``--workers``); the same spec runs on a cluster through mpi4py's
+``MPIPoolExecutor`` (``--executor mpi``, launched as
 ``mpiexec -n 17 python -m mpi4py.futures -m mdgran sweep ... --executor mpi``).
 """
 from __future__ import annotations
@@ -104,6 +107,7 @@ def case_summary(scene, result) -> dict:
         "status": result.status,
         "wall_s": result.stats.get("wall_time_s"),
         "ledger_error": result.max_ledger_error,
+        "ledger_bound": result.ledger_bound,
         "events": int(len(tr.ev_time)),
         "opens": int(np.sum(tr.ev_kind == 0)),
         "last_event_time": float(tr.ev_time[-1]) if len(tr.ev_time) else None,
@@ -132,6 +136,21 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str) -> dict:
     summary = {"index": case["index"], "params": case["params"], **case_summary(scene, res)}
     _atomic_json(cases / f"{stem}.json", summary)
     return summary
+
+
+def sweep_summary(results: list) -> dict:
+    """Counts of a sweep's case summaries, and the cases that are not complete, split into
+    ``ledger_exceeded`` (ledger error above the backend's bound) and ``failed``."""
+    from .simulation import LEDGER_EXCEEDED
+
+    def brief(r):
+        return {"index": r["index"], "params": r["params"], "status": r["status"]}
+
+    bad = [r for r in results if r["status"] != "complete"]
+    exceeded = [brief(r) for r in bad if r["status"].startswith(LEDGER_EXCEEDED)]
+    return {"cases": len(results), "complete": len(results) - len(bad),
+            "ledger_exceeded": exceeded,
+            "failed": [brief(r) for r in bad if not r["status"].startswith(LEDGER_EXCEEDED)]}
 
 
 def pending_cases(sweep: dict, out_dir: Path) -> list:
@@ -195,5 +214,7 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                     bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
                     print(f"{sweep['name']} [{bar}] {done0 + k}/{total} cases  "
                           f"elapsed {el:.0f}s  left ~{left:.0f}s", file=stream, flush=True)
-    return [json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
-            for c in sweep["cases"]]
+    results = [json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
+               for c in sweep["cases"]]
+    _atomic_json(out / "summary.json", sweep_summary(results))
+    return results

@@ -35,3 +35,18 @@ class WrongSnapOff(TightReference):
         law = self.model.law
         self.model = replace(self.model, law=ContactLaw(law.kind, law.fc, "force"))
         self.delta_off = self.model.law.delta_off
+
+
+class LedgerDefect(ReferenceBackend):
+    """The reference with a bookkeeping defect: ``D_hysteresis`` gains ``DEFECT * E_imp``
+    spread linearly over the run, so the ledger error ends at ``DEFECT`` (of E_imp)."""
+
+    name = "ledger-defect"
+    DEFECT = 1e-5
+
+    def frames(self, resume=None):
+        duration = float(self.scene.data["run"]["duration"])
+        extra = self.DEFECT * (self.scene.impulse_energy or 1.0)
+        for fr in super().frames(resume):
+            yield replace(fr, dissipated_hysteresis=fr.dissipated_hysteresis
+                          + extra * fr.time / duration)

@@ -1,8 +1,11 @@
 """Property-based bad input: hypothesis makes invalid scenes; every one must be rejected up
 front with exit status 2, one line on stderr naming the key, no traceback, no output file."""
+import io
 import math
+from contextlib import redirect_stderr
 
-from hypothesis import HealthCheck, given, settings
+import pytest
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mdgran.cli import main
@@ -97,27 +100,42 @@ def to_toml(scene):
     return "\n".join(out) + "\n"
 
 
-COUNT = {"generated": 0}
+EXAMPLES = 300
 
 
-@settings(max_examples=300, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(case=bad_scene())
-def test_every_bad_scene_is_rejected_cleanly(case, tmp_path, capsys):
-    scene, key = case
-    COUNT["generated"] += 1
-    path = tmp_path / "bad.toml"
-    path.write_text(to_toml(scene))
-    out = tmp_path / "out.h5"
-    status = main(["run", str(path), "--out", str(out), "--quiet"])
-    err = capsys.readouterr().err
-    assert status == 2, (scene, err)
-    assert err.count("\n") == 1 and "Traceback" not in err
-    assert key in err, (key, err)
-    assert not out.exists() and not list(tmp_path.glob("out.h5*"))
+@pytest.fixture(scope="module")
+def fuzzed(tmp_path_factory):
+    """Runs the property check once per module, whichever test asks first: hypothesis makes
+    EXAMPLES bad scenes (shrinking any that is not rejected cleanly); returns how many it
+    checked."""
+    tmp = tmp_path_factory.mktemp("fuzz")
+    seen = []
+
+    @settings(max_examples=EXAMPLES, deadline=None)
+    @given(case=bad_scene())
+    def check(case):
+        scene, key = case
+        seen.append(key)
+        path = tmp / "bad.toml"
+        path.write_text(to_toml(scene))
+        out = tmp / "out.h5"
+        with redirect_stderr(io.StringIO()) as stderr:
+            status = main(["run", str(path), "--out", str(out), "--quiet"])
+        err = stderr.getvalue()
+        assert status == 2, (scene, err)
+        assert err.count("\n") == 1 and "Traceback" not in err
+        assert key in err, (key, err)
+        assert not out.exists() and not list(tmp.glob("out.h5*"))
+
+    check()
+    return len(seen)
 
 
-def test_fuzz_count_reported():
-    """Runs after the property test in file order: it saw its 300 scenes."""
-    print(f"bad scenes generated and rejected: {COUNT['generated']}")
-    assert COUNT["generated"] >= 300
+def test_every_bad_scene_is_rejected_cleanly(fuzzed):
+    assert fuzzed >= EXAMPLES
+
+
+def test_fuzz_count_reported(fuzzed):
+    """Passes alone too: the fixture runs the generation if no test has yet."""
+    print(f"bad scenes generated and rejected: {fuzzed}")
+    assert fuzzed >= EXAMPLES

@@ -9,12 +9,33 @@ the backend's business.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Iterator
 
 import numpy as np
 
 CLOSE, OPEN = 1, 0
+
+# Declared ledger bounds (Backend.ledger_bound), calibrated on the reference (DOP853): ledger
+# error / E_s / tol = 0.008-0.23 on the built-in and hard scenes at tol 1e-8, 0.67 on
+# hard/undamped-long to t = 400 (a drift: 5.6e-6 E_imp to t = 1e5), and 4-14 on hard/grazing
+# at tol 1e-6 to 1e-12; below tol ~1e-12 it stops shrinking (micro-star: 1.2e-12 E_s at tol
+# 1e-14).  Fixed-step constants are the backends' ``ledger_c``.
+#: tolerance-controlled backends: multiple of the tolerance, per unit of the energy scale
+#: (3x over hard/grazing's 13.5 tol)
+LEDGER_TOL_MULTIPLE = 40.0
+#: ... below this tolerance, event location and round-off set the error, not the tolerance
+LEDGER_TOL_FLOOR = 1e-12
+#: ... the bound grows as 1 + T / LEDGER_TOL_TIME with the run's duration T (20x over the
+#: drift of hard/undamped-long to t = 1e5)
+LEDGER_TOL_TIME = 400.0
+#: fixed-step backends: no run is complete with a ledger error above this share of E_s
+#: (correct runs at the scenes' dt: up to 1.0e-2 E_s, hard/jkr-force at first order)
+LEDGER_CAP = 0.03
+#: round-off floor, in machine epsilons of (largest ledger term + N_c eta p) (hard/tiny:
+#: 1.4 of them measured on every backend)
+LEDGER_ROUNDOFF = 20.0
 
 
 class IntegrationError(RuntimeError):
@@ -47,10 +68,18 @@ class Backend:
     """Base class: holds the scene and model; subclasses implement :meth:`frames`."""
 
     name = "base"
+    #: every option the backend's constructor takes (``run(scene, name, **options)``); others
+    #: are rejected.  The default is the reference's: its adaptive ``tolerance``.
+    accepted_options: tuple = ("tolerance",)
 
     def __init__(self, scene, **options):
         from ..chain import model_from_scene
+        from ..scene import SceneError
 
+        unknown = [k for k in options if k not in self.accepted_options]
+        if unknown:
+            raise SceneError(unknown[0], f"unknown option of backend {self.name!r}; allowed: "
+                             + (", ".join(self.accepted_options) or "none"))
         self.scene = scene
         self.model = model_from_scene(scene)
         self.options = options
@@ -59,16 +88,63 @@ class Backend:
     #: order of convergence in ``run.dt`` for fixed-step backends (used for error estimates)
     order = 2
 
-    @classmethod
-    def refinement(cls, scene):
-        """Overrides for a more accurate run of the same scene, and the factor that turns the
-        difference between the two runs into an error estimate of the nominal one.
+    def refinement(self, scene=None):
+        """Overrides for a more accurate run of the same scene (default: this backend's), and
+        the factor that turns the difference between the two runs into an error estimate of
+        the nominal one.  Called on the backend as constructed: its options may set its order.
 
         Fixed-step backends of order ``p`` halve ``run.dt``: Richardson gives
         ``error(dt) ~ |x_dt - x_dt/2| * 2^p / (2^p - 1)``.
         """
-        dt = float(scene.data["run"]["dt"])
-        return [("run.dt", dt / 2)], 2.0**cls.order / (2.0**cls.order - 1.0)
+        dt = float((self.scene if scene is None else scene).data["run"]["dt"])
+        return [("run.dt", dt / 2)], 2.0**self.order / (2.0**self.order - 1.0)
+
+    # ---- declared energy-ledger bound (a run that exceeds it is not "complete") -----------
+    #: fixed-step backends: ``{order: C}`` of the bound ``C * dt**order`` (see
+    #: :meth:`ledger_bound`); None for a backend that declares no fixed-step bound
+    ledger_c: dict | None = None
+
+    def energy_scale(self, scale: float) -> float:
+        """``E_s = scale + N_c * E_a`` (units eta p): what the chain holds, the impulse energy
+        ``scale`` plus the adhesion energy of its ``N_c`` contacts, ``E_a = max(W_loop, 1)``
+        for an adhesive law (its energy unit eta p, or the energy of one snap-off if larger;
+        a DMT contact loses nothing on a snap-off but still stores energies of order eta p),
+        0 for Hertz.  Errors of every backend scale with ``E_s``: at small impulses (sweep
+        v0 = 1, hard/grazing, DMT scenes) the adhesion energy, not ``E_imp``, sets them."""
+        m = self.model
+        if m.law.kind == "hertz":
+            return scale
+        return scale + m.n_contacts * max(float(m.law.loop_energy), 1.0)
+
+    def ledger_roundoff(self, scale: float, term_max: float) -> float:
+        """Round-off floor, relative to ``scale``: ``LEDGER_ROUNDOFF * eps * (M + N_c) /
+        scale``.  The ledger sums terms up to ``M = term_max`` (largest |term| over the run),
+        and each of the ``N_c`` contact energies is a difference of numbers of order eta p
+        (the law's unit), so the total carries a few eps of ``M + N_c`` whatever the
+        integrator (hard/tiny, E_imp = 5e-13: 1.4e-2 of E_imp on every backend)."""
+        n_c = self.model.n_contacts
+        return LEDGER_ROUNDOFF * np.finfo(float).eps * (term_max + n_c) / scale
+
+    def ledger_model(self) -> float:
+        """The integrator's part of the bound, per unit of :meth:`energy_scale`.
+
+        Fixed-step (``self.dt`` and ``ledger_c``): ``min(C * dt**order, LEDGER_CAP)``.  The
+        cap is a policy, not an error model: a fixed-step run whose ledger is off by more than
+        ``LEDGER_CAP`` of the energy scale is not reported complete, even where it is on its
+        ``C dt**order`` curve (micro-star on fast at dt = 0.25: 0.12 E_imp).  A backend with
+        neither declares no bound (``inf``); the reference overrides this with its
+        tolerance rule.
+        """
+        dt = getattr(self, "dt", None)
+        if dt is None or not self.ledger_c or self.order not in self.ledger_c:
+            return math.inf
+        return min(self.ledger_c[self.order] * float(dt) ** self.order, LEDGER_CAP)
+
+    def ledger_bound(self, scale: float, term_max: float) -> float:
+        """The declared bound of ``max_t |E(t) - E0| / scale`` (the driver's ledger error,
+        ``scale`` = E_imp): ``ledger_model() * E_s / scale + ledger_roundoff(scale, M)``."""
+        return (self.ledger_model() * self.energy_scale(scale) / scale
+                + self.ledger_roundoff(scale, term_max))
 
     def frames(self, resume: dict | None = None) -> Iterator[Frame]:  # pragma: no cover
         """Yield frames from t = 0, or from just after a checkpoint (``resume``)."""

@@ -48,7 +48,8 @@ import numpy as np
 from scipy.integrate import DOP853
 from scipy.optimize import brentq
 
-from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+from .base import (CLOSE, LEDGER_TOL_FLOOR, LEDGER_TOL_MULTIPLE, LEDGER_TOL_TIME, OPEN, Backend,
+                   Event, Frame, IntegrationError)
 
 MAX_SWITCHES_AT_ONE_INSTANT = 4
 SIMULTANEOUS = 1e-12
@@ -93,6 +94,15 @@ class ReferenceBackend(Backend):
         """The same scene at 1/100 of the tolerance; its difference from the nominal run is
         taken as the nominal run's error."""
         return [("run.tolerance", max(float(scene.data["run"]["tolerance"]) / 100, 1e-14))], 1.0
+
+    def ledger_model(self) -> float:
+        """Ledger bound per unit of the energy scale: ``LEDGER_TOL_MULTIPLE * max(tol,
+        LEDGER_TOL_FLOOR) * (1 + T / LEDGER_TOL_TIME)``, ``T`` the run's duration: step control
+        is local, so the ledger error of a long run grows with ``T`` (constants and their
+        calibration in :mod:`mdgran.backends.base`)."""
+        t = float(self.scene.data["run"]["duration"])
+        return (LEDGER_TOL_MULTIPLE * max(self.tol, LEDGER_TOL_FLOOR)
+                * (1.0 + t / LEDGER_TOL_TIME))
 
     # ---- right-hand side and event functions ---------------------------------------------
     def _rhs_factory(self, closed):

@@ -1,0 +1,32 @@
+"""Scene overrides: load_scene(name, overrides) and Scene.with_overrides accept the same keys."""
+import pytest
+
+from mdgran.scene import SceneError, load_scene
+
+# keys with two ways of being given (fc for lambda; SI for nondimensional); micro-star has a
+# [material] and a schwarz law
+OTHER_WAY = [("contact.fc", -1.8), ("contact.lambda", 1.5), ("impulse.velocity_si", 0.3),
+             ("substrate.k1_si", 10.0), ("substrate.k3_si", 1e9), ("contact.damping_si", 2e-7),
+             ("run.duration_si", 1e-6), ("substrate.k1", 0.02), ("run.dt", 0.005)]
+
+
+@pytest.mark.parametrize("key, value", OTHER_WAY)
+def test_with_overrides_accepts_what_load_scene_accepts(key, value):
+    loaded = load_scene("micro-star", [(key, value)])
+    assert load_scene("micro-star").with_overrides([(key, value)]).data == loaded.data
+    assert loaded.with_overrides([("run.dt", 0.001)]).data["run"]["dt"] == 0.001  # re-resolves
+
+
+def test_with_overrides_of_si_key_on_a_scene_without_material_names_it():
+    with pytest.raises(SceneError, match=r"substrate\.k1_si: needs a \[material\]"):
+        load_scene("collision-pair").with_overrides([("substrate.k1_si", 1.0)])
+
+
+@pytest.mark.parametrize("key", ["contact.fcc", "substrate.k1si", "runs.dt", "dt"])
+def test_with_overrides_rejects_bad_key_naming_it(key):
+    with pytest.raises(SceneError) as exc:
+        load_scene("micro-star").with_overrides([(key, 1.0)])
+    assert exc.value.key == key and str(exc.value).startswith(f"{key}: ")
+    with pytest.raises(SceneError) as exc2:
+        load_scene("micro-star", [(key, 1.0)])
+    assert str(exc2.value) == str(exc.value)
