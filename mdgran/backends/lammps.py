@@ -27,6 +27,14 @@ substrate term when the scene has one) is a Python callback of ``fix external pf
   ``sqrt(delta - delta_min)``, cubic spline in that variable; 2e-12 absolute force error), written
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
+* **Native contact** (``contact="native"``): the same contact as ``fix mdgran/chain`` of the
+  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.native_plugin`), in place of the hook: same law
+  (the same spline coefficients, handed over in a file), same switching rule, same operations,
+  so the two agree to round-off (measured bitwise); the contact then costs ~20-27 ns per
+  bead-step instead of ~155-190 (benchmarks/bench_lammps_plugin.py).  Events,
+  ``D_hysteresis`` and ``D_viscous`` are read back from the fix; its per-contact states are
+  per-atom data that migrate with the atoms, and with MPI each rank updates the contacts of its
+  own atoms.
 """
 from __future__ import annotations
 
@@ -35,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import native_plugin
 from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
@@ -56,14 +65,25 @@ class LammpsBackend(Backend):
     name = "lammps"
     order = 1  # step-quantized snap events: first order in dt (second order between events)
     accepted_options = ("comm", "contact_eval", "table_points", "table_file", "extra_commands",
-                        "dt")
+                        "dt", "contact")
     #: ledger bound ``C dt`` per unit of the energy scale (Backend.ledger_model): measured C
-    #: (ledger error / E_s / dt) up to 0.9 (hard/jkr-force at dt = 0.0025; micro-star 0.43)
+    #: (ledger error / E_s / dt) up to 1.0 (hard/jkr-force to t = 400 at dt = 0.01; 0.88 at
+    #: dt = 0.0025), micro-star 0.42 (dt = 0.0025) and 0.17 (0.01), the other hard cases
+    #: 0.01-0.51 at dt = 0.01: 4x margin (3x at dt = 0.01, where the cap binds)
     ledger_c = {1: 4.0}
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
-                 table_file=None, extra_commands=(), **options):
+                 table_file=None, extra_commands=(), contact="hook", **options):
         check_available()  # LammpsUnavailable (an ImportError): one line, before anything runs
+        if contact not in ("hook", "native"):
+            raise SceneError("contact", f"must be 'hook' or 'native', not {contact!r}")
+        self.contact = contact
+        self.plugin = None
+        if contact == "native":
+            try:  # the plugin built for this LAMMPS (built now if only a compiler is there)
+                self.plugin = native_plugin.plugin_path()
+            except native_plugin.PluginUnavailable as exc:
+                raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
         super().__init__(scene, **options)
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
@@ -81,7 +101,9 @@ class LammpsBackend(Backend):
         self.walls = m.walls
         self.n = m.n
         self.ntot = m.n + 2 if m.walls else m.n
-        self.stats = {"method": "LAMMPS velocity Verlet + Python contact hook",
+        method = ("Python contact hook" if contact == "hook"
+                  else "native contact (fix mdgran/chain)")
+        self.stats = {"method": f"LAMMPS velocity Verlet + {method}",
                       "dt": self.dt, "steps": 0, "events": 0, "contact_eval": contact_eval,
                       "wall_time_s": 0.0, "callback_s": 0.0}
         if self.table is not None:
@@ -129,9 +151,53 @@ class LammpsBackend(Backend):
         self._delta_prev = None
         self._error = None
         self.rank = lmp.extract_setting("world_rank")
+        if self.contact == "native":
+            self._start_native(lmp)
+            return
         lmp.set_fix_external_callback("contact", self._callback, None)
         if self.table_file is not None and self.table is not None and self.rank == 0:
             self.table.write_lammps(self.table_file)
+
+    def _start_native(self, lmp):
+        """Replace ``fix external`` by ``fix mdgran/chain`` (appended after the other fixes:
+        the x force is then ``(0 - k1 u) + F`` instead of ``(0 + F) - k1 u``, the same number)."""
+        import tempfile
+
+        m, law = self.model, self.law
+        args = ["law hertz" if law.kind == "hertz" else f"law schwarz fc {law.fc!r}",
+                f"snap_off {law.snap_off}", f"damping {float(m.damping)!r}",
+                f"k1 {float(m.k1)!r}", f"k3 {float(m.k3)!r}", f"gap {float(m.gap)!r}",
+                f"walls {'yes' if self.walls else 'no'}",
+                f"closed {'yes' if m.gap <= 0 else 'no'}"]
+        if self.table is not None:  # every rank writes its own copy (no shared file system)
+            self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+            path = Path(self._tmpdir.name) / "contact.spline"
+            native_plugin.write_spline(self.table, path)
+            args.append(f"table {path}")
+        for cmd in ("unfix contact", *native_plugin.load_commands(self.plugin),
+                    "fix contact all mdgran/chain " + " ".join(args),
+                    "fix_modify contact energy yes"):
+            lmp.command(cmd)
+        self._events_read = 0
+        if self.table_file is not None and self.table is not None and self.rank == 0:
+            self.table.write_lammps(self.table_file)
+
+    def _read_native(self):
+        """Dissipation, new events and contact states from fix mdgran/chain (synced over ranks at
+        the end of every run)."""
+        lmp = self.lmp
+        self.d_hyst = lmp.extract_fix("contact", 0, 1, 0)  # LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
+        self.d_visc = lmp.extract_fix("contact", 0, 1, 1)
+        n = int(lmp.extract_fix("contact", 0, 1, 2))
+        for row in range(self._events_read, n):  # LMP_TYPE_ARRAY: time, contact, kind, step
+            t, num, kind = (lmp.extract_fix("contact", 0, 2, row, c) for c in range(3))
+            self.events.append(Event(t, int(num), CLOSE if kind == 1.0 else OPEN))
+        self.stats["events"] += n - self._events_read
+        self._events_read = n
+        self.stats["steps"] = int(lmp.extract_global("ntimestep"))
+        # per-atom vector by tag: the state of the contact to the atom's right
+        state = np.ctypeslib.as_array(lmp.gather("f_contact", 1, 1))
+        self.closed = state[:self.model.n_contacts] != 0.0
 
     # ---- the contact hook ---------------------------------------------------------------
     def _by_tag(self, nlocal):
@@ -265,6 +331,8 @@ class LammpsBackend(Backend):
         return disp.copy(), v.copy()
 
     def _frame(self, k, t):
+        if self.contact == "native":
+            self._read_native()
         x, v = self._gather()
         fr = Frame(step=k, time=float(t), x=x, v=v, closed=self.closed.copy(),
                    dissipated_viscous=self.d_visc, dissipated_hysteresis=self.d_hyst,
@@ -276,7 +344,9 @@ class LammpsBackend(Backend):
         try:
             self.lmp.command(command)
         except Exception as exc:  # noqa: BLE001 - LAMMPS errors arrive as plain exceptions
-            raise IntegrationError(f"LAMMPS stopped at step {self._last_step}: "
+            step = self._last_step if self.contact == "hook" else \
+                self.lmp.extract_global("ntimestep")
+            raise IntegrationError(f"LAMMPS stopped at step {step}: "
                                    f"{str(exc).splitlines()[0]}") from None
         if self._error is not None:
             if isinstance(self._error, IntegrationError):

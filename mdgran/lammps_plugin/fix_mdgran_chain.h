@@ -1,0 +1,114 @@
+// mdgran: fix mdgran/chain, the hysteretic contact of a 1-D bead chain (see the .cpp file).
+#ifndef LMP_FIX_MDGRAN_CHAIN_H
+#define LMP_FIX_MDGRAN_CHAIN_H
+
+#include "fix.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+namespace LAMMPS_NS {
+
+class FixMdgranChain : public Fix {
+ public:
+  FixMdgranChain(class LAMMPS *, int, char **);
+  ~FixMdgranChain() override;
+  int setmask() override;
+  void init() override;
+  void setup(int) override;
+  void post_force(int) override;
+  void post_run() override;
+
+  double compute_scalar() override;
+  double compute_vector(int) override;
+  double compute_array(int, int) override;
+
+  void grow_arrays(int) override;
+  void copy_arrays(int, int, int) override;
+  int pack_exchange(int, double *) override;
+  int unpack_exchange(int, double *) override;
+  int pack_restart(int, double *) override;
+  void unpack_restart(int, int) override;
+  int size_restart(int) override;
+  int maxsize_restart() override;
+  void write_restart(FILE *) override;
+  void restart(char *) override;
+  int pack_forward_comm(int, int *, double *, int, int *) override;
+  void unpack_forward_comm(int, int, double *) override;
+  double memory_usage() override;
+
+  // ---- the contact law (public: the unit test calls them through a tiny driver) ----------
+  double law_force(double delta) const;     // attached branch, exact (Newton) or table
+  double law_energy(double delta) const;    // V(delta) on the attached branch, exact
+  double exact_force(double delta) const;
+  // cubic spline in w = sqrt(delta - base), as ContactTable.force (Horner, highest power first)
+  inline double spline_force(double d) const
+  {
+    double w = std::sqrt(std::max(d - tab_base, 0.0));
+    double s = std::min(w * tab_scale, (double) (tab_n - 1) - 1e-9);
+    long i = (long) s;
+    double x = (s - (double) i) * tab_h;
+    const double *c = &tab_coef[4 * i];
+    return ((c[0] * x + c[1]) * x + c[2]) * x + c[3];
+  }
+
+ private:
+  // law constants (names of mdgran/contact.py)
+  int hertz;                                // 1: f = delta_+^(3/2); 0: Schwarz
+  double fc, sigma, tm, big, sqrt_big, delta_min, delta_off, t0;
+  int strict;                               // delta_off == 0: strict inequalities
+  int snap_force;                           // snap-off rule: 0 displacement, 1 force
+  double damping, k1, k3, gap;
+  int walls;
+  // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
+  int use_table, tab_n;
+  double tab_base, tab_scale, tab_h, tab_delta_max;
+  std::vector<double> tab_coef;             // (n - 1) x 4, highest power first
+  std::string table_file;
+
+  // per-atom state, keyed by the atom: its initial x and the contact to its right
+  double *x0;                               // initial x (displacement u = x - x0)
+  double *closed;                           // 1.0 closed, 0.0 open (contact tag -> tag + 1)
+  double *dprev;                            // that contact's delta at the previous step
+  double *aprev;                            // the atom's acceleration at the previous step
+  // scratch
+  double *fcon;                             // force of the contact to the right
+  double *u, *w;                            // displacement, velocity estimate
+  int *left;                                // local index of the left neighbour (-1: none)
+  int nmax_scratch;
+
+  // step bookkeeping (as the Python hook)
+  bigint last_step;
+  int have_last;                            // a step was computed (delta_prev, acc_prev set)
+  double power_prev;                        // damping power at the previous step (this rank)
+  double d_hyst, d_visc;                    // this rank's dissipation since the start
+  double d_hyst_all, d_visc_all;            // summed over ranks at the last sync
+  bigint synced_step;                       // step of the last sync (several ranks)
+  bigint ncompute, energy_at;               // force evaluations; the one energy_cache is for
+  double energy_cache;                      // contact energy (thermo asks for it twice)
+
+  struct Event {
+    bigint step;
+    tagint left;                            // tag of the contact's left atom
+    int kind;                               // 1 close, -1 open
+    double time;
+  };
+  std::vector<Event> ev_local;              // since the last sync, this rank
+  std::vector<Event> ev_all;                // every event so far, all ranks, in order
+
+  double t_of_delta(double delta) const;
+  double antiderivative(double t) const;
+  void read_table(const char *file);
+  void compute(bigint step);
+  void sync();
+  tagint ntags;                             // atom->natoms: the last tag (a wall with walls)
+  inline int is_wall(tagint t) const { return walls && (t == 1 || t == ntags); }
+  inline double disp(int i) const;
+  tagint contact_number(tagint left) const { return walls ? left : left + 1; }
+};
+
+}    // namespace LAMMPS_NS
+
+#endif

@@ -1,0 +1,31 @@
+// mdgran: registration of fix mdgran/chain as a LAMMPS plugin ("plugin load mdgranplugin.so").
+// Built by mdgran/native_plugin.py, which defines MDGRAN_LAMMPS_VERSION (the version string of
+// the LAMMPS whose headers it compiled against, e.g. "22 Jul 2025").
+#include "lammpsplugin.h"
+
+#include "fix_mdgran_chain.h"
+
+using namespace LAMMPS_NS;
+
+static Fix *mdgran_chain_creator(LAMMPS *lmp, int argc, char **argv)
+{
+  return new FixMdgranChain(lmp, argc, argv);
+}
+
+extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
+{
+  lammpsplugin_t plugin;
+  auto register_plugin = (lammpsplugin_regfunc) regfunc;
+  plugin.version = MDGRAN_LAMMPS_VERSION;
+  plugin.style = "fix";
+  plugin.name = "mdgran/chain";
+  plugin.info = "mdgran/chain: hysteretic Schwarz/JKR/DMT/Hertz contact of a 1-D chain by tag";
+  plugin.author = "mdgran";
+  plugin.creator.v2 = (lammpsplugin_factory2 *) &mdgran_chain_creator;
+  plugin.handle = handle;
+  (*register_plugin)(&plugin, lmp);
+}
+
+// Version the plugin was compiled for: mdgran/native_plugin.py compares it with the LAMMPS that
+// loads it (LAMMPS itself only prints a note on a mismatch, and the class layouts may differ).
+extern "C" const char *mdgran_plugin_lammps_version() { return MDGRAN_LAMMPS_VERSION; }
