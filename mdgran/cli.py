@@ -6,6 +6,14 @@ with every frame so far and its ``status`` attribute saying what failed), includ
 whose energy-ledger error exceeds its backend's declared bound (status ``ledger-exceeded: ...``,
 one line on stderr; every frame is in the file) and a sweep with any case not complete.
 Heavy imports are done inside the subcommands so that ``mdgran scenes`` starts fast.
+
+``--out`` is checked before anything runs (:func:`check_out_file`, :func:`check_out_dir`): a
+file name for ``run`` (not empty, not a folder, not ending in ``/``: a trailing slash is refused,
+not taken as a folder to put a file in; not the scene file itself; in a folder that exists or
+can be created and is writable; short enough for the temporary ``NAME.tmp-PID`` and
+``NAME.partial`` beside it), a folder for ``compare``, ``sweep`` and ``report`` (not an existing
+file).  ``info --json`` prints values that are not finite (``contact_lambda`` of the JKR limit
+is infinite) as ``null``: JSON has no Infinity or NaN.
 """
 from __future__ import annotations
 
@@ -27,6 +35,87 @@ class _Parser(argparse.ArgumentParser):
 def _fail(message: str, status: int) -> int:
     print(f"mdgran: error: {message}", file=sys.stderr)
     return status
+
+
+#: longest suffix H5MDWriter puts after the output file's name (".tmp-" + a pid; ".partial")
+TMP_SUFFIX = len(".tmp-") + 10
+
+
+def _existing_ancestor(path):
+    from pathlib import Path
+
+    p = Path(path).absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _name_max(folder) -> int:
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+def _check_creatable(out: str, key: str):
+    """The first existing folder on ``out``'s way is a writable folder; no name is too long."""
+    from pathlib import Path
+
+    anc = _existing_ancestor(Path(out).absolute().parent)
+    if not anc.is_dir():
+        raise UsageError(f"{key}: {str(anc)!r} is a file, so {out!r} cannot be created in it")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise UsageError(f"{key}: cannot create {out!r}: folder {str(anc)!r} is not writable")
+    limit = _name_max(anc)
+    for part in Path(out).parts:
+        if len(os.fsencode(part)) > limit:
+            raise UsageError(f"{key}: the name {part[:20]!r}... is {len(os.fsencode(part))} "
+                             f"bytes, the file system allows {limit}")
+    return limit
+
+
+def check_out_file(out: str, scene_spec: str | None = None, key: str = "--out"):
+    """Refuse up front an output file that the run could not write at its end."""
+    from pathlib import Path
+
+    if not out:
+        raise UsageError(f"{key}: must name an output file, e.g. run.h5")
+    p = Path(out)
+    if out.endswith(("/", os.sep)) or p.name in ("", ".", "..") or p.is_dir():
+        raise UsageError(f"{key}: {out!r} is a folder; give a file name, e.g. "
+                         f"{os.path.join(out, 'run.h5')}")
+    limit = _check_creatable(out, key)
+    if len(os.fsencode(p.name)) + TMP_SUFFIX > limit:
+        raise UsageError(f"{key}: the file name is {len(os.fsencode(p.name))} bytes; at most "
+                         f"{limit - TMP_SUFFIX} (room for the temporary .tmp-PID or .partial "
+                         f"suffix in the file system's {limit})")
+    if scene_spec and p.exists() and Path(scene_spec).is_file() and \
+            os.path.samefile(scene_spec, p):
+        raise UsageError(f"{key}: {out!r} is the scene file; give another name")
+
+
+def check_out_dir(out: str, key: str = "--out"):
+    """Refuse up front an output folder that cannot be made."""
+    from pathlib import Path
+
+    if not out:
+        raise UsageError(f"{key}: must name a folder")
+    if Path(out).exists() and not Path(out).is_dir():
+        raise UsageError(f"{key}: {out!r} is a file; give a folder")
+    _check_creatable(out, key)
+
+
+def _finite_or_none(obj):
+    """``obj`` with every float that is not finite replaced by None (JSON null)."""
+    import math
+
+    if isinstance(obj, dict):
+        return {k: _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def _load(args):
@@ -82,7 +171,7 @@ def cmd_info(args) -> int:
     scene = _load(args)
     info = scene_info(scene)
     if args.json:
-        print(json.dumps(info, indent=2, default=float))
+        print(json.dumps(_finite_or_none(info), indent=2, default=float, allow_nan=False))
         return 0
     for k, v in info.items():
         if isinstance(v, float):
@@ -95,6 +184,7 @@ def cmd_run(args) -> int:
     from .backends.base import IntegrationError
     from .simulation import LEDGER_EXCEEDED, run
 
+    check_out_file(args.out, args.scene)
     scene = _load(args)
     small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
     try:
@@ -127,6 +217,7 @@ def cmd_run(args) -> int:
 def cmd_compare(args) -> int:
     from .compare import compare
 
+    check_out_dir(args.out)
     scene = _load(args)
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
     if len(backends) < 2:
@@ -151,6 +242,7 @@ def cmd_sweep(args) -> int:
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
+    check_out_dir(args.out)
     overrides = [parse_override(s) for s in (args.set or [])]
     res = run_sweep(args.sweep, args.out, workers=args.workers, executor=args.executor,
                     overrides=overrides, progress=not args.quiet, small=args.small,
@@ -172,6 +264,7 @@ def cmd_report(args) -> int:
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
+    check_out_dir(args.dir, "DIR")
     if args.sweep_dir is not None and not (Path(args.sweep_dir) / "sweep.json").exists():
         raise UsageError(f"--sweep-dir: {args.sweep_dir} holds no sweep.json (a folder written "
                          "by mdgran sweep)")
@@ -211,7 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("run", help="run a scene on one backend, write H5MD")
     scene_args(s)
     s.add_argument("--backend", default="reference", help="reference | lammps | fast")
-    s.add_argument("--out", required=True, help="output file (.h5)")
+    s.add_argument("--out", required=True, help="output file (.h5; not a folder: a name "
+                   "ending in / is refused)")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
                    help="checkpoint every SECONDS of wall time into OUT.partial (0: off; "

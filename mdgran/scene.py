@@ -9,6 +9,27 @@ An optional ``[material]`` table (SI: ``diameter`` m, ``E`` Pa, ``nu``, ``w`` J/
 kg/m^3, ``modulus`` = "table" | "text", or ``K`` Pa) gives the scales; the SI keys
 ``substrate.k1_si`` (N/m), ``substrate.k3_si`` (N/m^3), ``contact.damping_si`` (Ns/m),
 ``impulse.velocity_si`` (m/s) and ``run.duration_si`` (s) then set the nondimensional ones.
+
+**Limits** (:data:`LIMITS`).  Besides being finite, a few values have ranges outside which the
+backends cannot work or the numbers are not representable; they are checked on the
+nondimensional values, so also after the SI conversion (an error then names both keys):
+
+* ``|impulse.velocity| <= 1e3`` (p per time unit, 15x the paper's largest): faster impulses
+  compress contacts by hundreds of p, where double precision no longer resolves the reference's
+  absolute event tolerance (1e-13 p) and its event location stalls (measured: v0 = 1e4 stalls
+  at t = 1.58 on micro-star; 1e3 runs).
+* ``substrate.k1 <= 1e6`` and ``substrate.k3 <= 1e6`` (eta/p and eta/p^3; the contact's own
+  stiffness is of order 1): stiffer, the substrate period ``2 pi / sqrt(k1)`` falls below 6e-3
+  time units and a run needs many millions of steps (at 1e300 the step size underflows).
+* ``contact.damping <= 1e3`` (sqrt(m eta / p), 7.5e4 x the paper's): a closed contact then
+  relaxes in 1e-3 time units, which bounds the step of the explicit integrators (DOP853 at 1e6:
+  1.6e-6 per step, 2.5e8 steps to t = 400).
+* ``[material]``: diameter in [1e-9, 10] m, E and K in [1e3, 1e13] Pa, w in [1e-6, 1e3] J/m^2,
+  density in [1, 1e5] kg/m^3, D0 in [1e-12, 1e-6] m (physical materials; far outside, the
+  scales overflow or underflow).
+
+``contact.lambda`` is used by law ``schwarz`` only; a scene that gives it with another law is
+refused (``--set contact.law=jkr`` on a scene file that gives lambda drops the file's lambda).
 """
 from __future__ import annotations
 
@@ -35,6 +56,20 @@ class SceneError(ValueError):
         self.key = key
 
 
+#: key -> (lowest, highest) allowed (see the module doc; ``velocity`` bounds |v|)
+LIMITS = {
+    "impulse.velocity": (-1e3, 1e3),
+    "substrate.k1": (0.0, 1e6),
+    "substrate.k3": (0.0, 1e6),
+    "contact.damping": (0.0, 1e3),
+    "material.diameter": (1e-9, 10.0),
+    "material.E": (1e3, 1e13),
+    "material.K": (1e3, 1e13),
+    "material.w": (1e-6, 1e3),
+    "material.density": (1.0, 1e5),
+    "material.D0": (1e-12, 1e-6),
+}
+
 # key -> (default, kind, constraint text); kinds are checked in _check_value
 SCHEMA = {
     "chain": {
@@ -46,19 +81,23 @@ SCHEMA = {
         "law": ("schwarz", LAWS, "one of " + ", ".join(repr(x) for x in LAWS)),
         "lambda": (0.64, "float>=0", "a finite number >= 0 (Maugis parameter)"),
         "fc": (None, "fc", "a number in [-2, -1.5] (units of pi R w)"),
-        "damping": (0.013285, "float>=0", "a finite number >= 0"),
+        "damping": (0.013285, "float>=0", "a number in [0, 1e3] (heavier damping needs steps "
+                    "below 1e-3 time units)"),
         "snap_off": ("displacement", SNAP_OFF_RULES, "'displacement' or 'force'"),
         "damping_si": (None, "float>=0?", "a finite number >= 0 in Ns/m (needs [material])"),
     },
     "substrate": {
-        "k1": (0.012107, "float>=0", "a finite number >= 0"),
-        "k3": (0.0, "float>=0", "a finite number >= 0"),
+        "k1": (0.012107, "float>=0", "a number in [0, 1e6] (stiffer, the substrate period "
+               "falls below 6e-3 time units)"),
+        "k3": (0.0, "float>=0", "a number in [0, 1e6] (stiffer, the substrate period falls "
+               "below 6e-3 time units)"),
         "k1_si": (None, "float>=0?", "a finite number >= 0 in N/m (needs [material])"),
         "k3_si": (None, "float>=0?", "a finite number >= 0 in N/m^3 (needs [material])"),
     },
     "impulse": {
         "bead": (1, "int>=1", "an integer from 1 to chain.n"),
-        "velocity": (1.0, "float", "a finite number"),
+        "velocity": (1.0, "float", "a number with |v| <= 1e3 (p per time unit; faster "
+                     "impulses leave the precision the event location needs)"),
         "velocity_si": (None, "float?", "a finite number in m/s (needs [material])"),
     },
     "run": {
@@ -72,14 +111,14 @@ SCHEMA = {
         "positions": (True, "bool", "true or false (store H5MD position; false for long chains)"),
     },
     "material": {
-        "diameter": (None, "float>0?", "a finite number > 0 in m"),
-        "E": (None, "float>0?", "a finite number > 0 in Pa"),
+        "diameter": (None, "float>0?", "a number in [1e-9, 10] (m)"),
+        "E": (None, "float>0?", "a number in [1e3, 1e13] (Pa)"),
         "nu": (None, "nu?", "a number in [0, 0.5)"),
-        "w": (None, "float>0?", "a finite number > 0 in J/m^2"),
-        "density": (None, "float>0?", "a finite number > 0 in kg/m^3"),
+        "w": (None, "float>0?", "a number in [1e-6, 1e3] (J/m^2)"),
+        "density": (None, "float>0?", "a number in [1, 1e5] (kg/m^3)"),
         "modulus": ("table", ("table", "text"), "'table' (K = E/(2(1-nu^2))) or 'text'"),
-        "K": (None, "float>0?", "a finite number > 0 in Pa"),
-        "D0": (None, "float>0?", "a finite number > 0 in m"),
+        "K": (None, "float>0?", "a number in [1e3, 1e13] (Pa)"),
+        "D0": (None, "float>0?", "a number in [1e-12, 1e-6] (m)"),
     },
     "meta": {
         "description": ("", "str", "a string"),
@@ -123,7 +162,8 @@ def _check_value(key: str, value, kind, allowed: str):
            or (base == "fc" and not -2.0 <= value <= -1.5)
            or (base == "tol" and not 1e-14 <= value <= 1e-3)
            or (base == "nu" and not 0.0 <= value < 0.5))
-    if bad:
+    lo, hi = LIMITS.get(key, (-math.inf, math.inf))
+    if bad or not lo <= value <= hi:
         raise SceneError(key, f"must be {allowed}, not {value}")
     return value
 
@@ -142,6 +182,8 @@ def parse_override(text: str):
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    except RecursionError:
+        raise SceneError(key, "the value is nested too deeply") from None
     return key, value
 
 
@@ -191,13 +233,20 @@ class Scene:
 def apply_overrides(raw: dict, overrides) -> dict:
     """Set ``(key, value)`` overrides in unresolved scene data (in place; returned).  An
     override of one way of giving a value (``contact.fc``/``lambda``, ``X_si``/``X``)
-    replaces the other way."""
+    replaces the other way; an override of ``contact.law`` with another law than schwarz drops
+    the ``lambda`` and ``fc`` the scene file gives (only schwarz uses them)."""
+    given = set()
     for key, value in overrides:
         _set_key(raw, key, value)
+        given.add(key)
         sec, name = key.split(".")
         other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
             name[:-3] if name.endswith("_si") else f"{name}_si")
         raw.get(sec, {}).pop(other, None)
+    if raw.get("contact", {}).get("law", "schwarz") != "schwarz" and "contact.law" in given:
+        for name in ("lambda", "fc"):
+            if f"contact.{name}" not in given:
+                raw["contact"].pop(name, None)
     return raw
 
 
@@ -234,6 +283,11 @@ def resolve(raw: dict) -> dict:
         raise SceneError("contact.fc", f"applies to law 'schwarz' only (law is {c['law']!r})")
     if c["fc"] is not None and "lambda" in raw.get("contact", {}):
         raise SceneError("contact.fc", "give contact.lambda or contact.fc, not both")
+    if c["law"] != "schwarz":
+        if "lambda" in raw.get("contact", {}):
+            raise SceneError("contact.lambda", f"not used by law {c['law']!r} (only by "
+                             "'schwarz'); leave it out")
+        c["lambda"] = None  # not part of this scene (nor of its stored TOML)
     if ch["boundary"] == "free" and ch["n"] < 2:
         raise SceneError("chain.n", "must be >= 2 for a free chain")
     if data["impulse"]["bead"] > ch["n"]:
@@ -267,6 +321,11 @@ def _derive_si(data: dict, raw: dict):
         value = data[sec][name] / getattr(scales, unit)
         if power == 3:  # K3 x^3: K3_hat = K3 p^2 / (eta/p)
             value = data[sec][name] * scales.p**2 / scales.stiffness
+        _, kind, allowed = SCHEMA[tsec][tname]
+        try:  # the converted value obeys the nondimensional key's rules and limits
+            value = _check_value(f"{tsec}.{tname}", value, kind, allowed)
+        except SceneError as exc:
+            raise SceneError(f"{sec}.{name}", f"{data[sec][name]:g} gives {exc}") from None
         data[tsec][tname] = value
         data[sec][name] = None  # consumed: the resolved scene holds the nondimensional key
 
@@ -274,6 +333,11 @@ def _derive_si(data: dict, raw: dict):
 def load_scene(spec: str, overrides=()) -> Scene:
     """Load a built-in scene by name or a TOML file by path; apply ``(key, value)`` overrides."""
     scenes = builtin_scenes()
+    try:
+        spec.encode("utf-8")
+    except UnicodeEncodeError:
+        raise SceneError("SCENE", f"{spec!r}: the path is not valid UTF-8 (the scene's name "
+                         "goes into the output file); rename the file") from None
     if spec in scenes:
         path, name = scenes[spec], spec
     else:
@@ -281,11 +345,20 @@ def load_scene(spec: str, overrides=()) -> Scene:
         if not path.suffix == ".toml" or not path.is_file():
             raise SceneError("SCENE", f"{spec!r} is neither a built-in scene ("
                              + ", ".join(scenes) + ") nor a readable .toml file")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SceneError("SCENE", f"{path} is not valid TOML: {exc}") from None
+    raw = read_toml(path, "SCENE")
     return Scene(name, resolve(apply_overrides(raw, overrides)))
+
+
+def read_toml(path: Path, key: str) -> dict:
+    """A TOML file's tables; anything unreadable raises :class:`SceneError` naming ``key``."""
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SceneError(key, f"{path} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SceneError(key, f"{path} is not valid TOML: values nested too deeply") from None
+    except OSError as exc:
+        raise SceneError(key, f"{path} cannot be read: {exc.strerror}") from None
 
 
 def describe(spec: str) -> str:

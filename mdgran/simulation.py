@@ -16,6 +16,7 @@ with ``LEDGER_EXCEEDED`` and says both numbers.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 from .backends import BACKENDS, get_backend
@@ -60,6 +61,72 @@ def mpi_rank() -> int:
     return 0
 
 
+def available_memory() -> float | None:
+    """Bytes of memory available to a new allocation (``MemAvailable`` of /proc/meminfo, else
+    the free physical pages), or None where neither is known."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def resource_estimate(scene, keep: bool = True) -> dict:
+    """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
+    ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
+    H5MD writer's buffer (``H5MD_BLOCK`` frames of x and v and their copies at a flush, plus 3
+    arrays of positions), the frames kept in memory (``keep``: x and v, and the copies made
+    for the trajectory, plus ~500 bytes of Python objects per frame); on disk x, v (and
+    positions) and the six observables, each with its step and time."""
+    from .reporters import H5MD_BLOCK
+
+    n = int(scene.data["chain"]["n"])
+    r = scene.data["run"]
+    frames = int(float(r["duration"]) / float(r["output_interval"]) + 1e-9) + 1
+    pos = 3 if scene.data["output"]["positions"] else 0
+    block = min(frames, H5MD_BLOCK)
+    memory = 8.0 * n * (10 + block * (4 + pos)) + (frames * (4 * 8.0 * n + 500) if keep else 0)
+    disk = frames * (8.0 * n * (2 + pos) + 16.0 * (2 + (pos > 0)) + 6 * 24.0)
+    return {"n": n, "frames": frames, "memory": memory, "disk": disk}
+
+
+def check_resources(scene, out=None, keep: bool = True):
+    """Refuse up front (:class:`SceneError`, exit status 2) a run whose frames cannot fit: the
+    :func:`resource_estimate` lower bound above the available memory, or the output file above
+    the free space of the file system that will hold ``out``."""
+    import shutil
+    from pathlib import Path
+
+    est = resource_estimate(scene, keep)
+    what = (f"{est['n']} beads x {est['frames']} frames (run.duration / run.output_interval)")
+    gib = 2.0**30
+    avail = available_memory()
+    if avail is not None and est["memory"] > avail:
+        raise SceneError("chain.n, run.output_interval",
+                         f"{what} need at least {est['memory'] / gib:.3g} GiB of memory, "
+                         f"{avail / gib:.3g} GiB are available; make chain.n smaller or "
+                         "run.output_interval larger")
+    if out is not None:
+        where = Path(out).absolute().parent
+        while not where.exists() and where != where.parent:
+            where = where.parent
+        try:
+            free = float(shutil.disk_usage(where).free)
+        except OSError:
+            return
+        if est["disk"] > free:
+            raise SceneError("chain.n, run.output_interval",
+                             f"{what} need at least {est['disk'] / gib:.3g} GiB on disk, "
+                             f"{free / gib:.3g} GiB are free at {where} (--out); make chain.n "
+                             "smaller or run.output_interval larger")
+
+
 def make_backend(scene, backend: str, **options):
     if backend not in BACKENDS:
         raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
@@ -81,8 +148,10 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     its frames are what the backend computed; the status says they are not to be trusted).  Ctrl-C
     removes the partial output and re-raises, unless ``checkpoint_every`` (seconds) is set:
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
-    in-memory trajectory then holds only the resumed frames; the file holds all).
+    in-memory trajectory then holds only the resumed frames; the file holds all).  A run whose
+    frames cannot fit in memory or on disk is refused first (:func:`check_resources`).
     """
+    check_resources(scene, out if mpi_rank() == 0 else None, keep)
     b = make_backend(scene, backend, **options)
     model = b.model
     reps = list(reporters)

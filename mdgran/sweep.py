@@ -38,12 +38,7 @@ import time as _time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib
-
-from .scene import SceneError, load_scene
+from .scene import SceneError, load_scene, read_toml
 
 SWEEP_DIR = Path(__file__).parent / "sweeps"
 
@@ -57,16 +52,21 @@ def load_sweep(spec: str, extra_overrides=(), small: bool = False) -> dict:
     each case is ``{"index", "overrides": [[key, value], ...], "params": {key: value}}``."""
     sweeps = builtin_sweeps()
     path = sweeps.get(spec, Path(spec))
+    try:
+        spec.encode("utf-8")
+    except UnicodeEncodeError:
+        raise SceneError("SWEEP", f"{spec!r}: the path is not valid UTF-8; rename the file") \
+            from None
     if not path.is_file():
         raise SceneError("SWEEP", f"{spec!r} is neither a built-in sweep ("
                          + ", ".join(sweeps) + ") nor a readable .toml file")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("SWEEP", f"{path} is not valid TOML: {exc}") from None
+    raw = read_toml(path, "SWEEP")
     for sec in raw:
         if sec not in ("sweep", "fixed", "grid", "small"):
             raise SceneError(sec, "unknown sweep section; allowed: sweep, fixed, grid, small")
+        if not isinstance(raw[sec], dict):
+            raise SceneError(sec, f"must be a table ([{sec}] with its keys below it), not "
+                             f"{raw[sec]!r}"[:200])
     head = raw.get("sweep", {})
     scene = head.get("scene")
     if not isinstance(scene, str):
@@ -187,7 +187,13 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
         sweep["backend"] = backend
     out = Path(out_dir)
     if (out / "sweep.json").exists():
-        before = json.loads((out / "sweep.json").read_text())
+        try:
+            before = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+            if not isinstance(before, dict):
+                raise ValueError("not a JSON object")
+        except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+            raise SceneError("--out", f"{out}/sweep.json is not a sweep's record ({exc}); use "
+                             "a new folder or remove it") from None
         if before.get("backend") != sweep["backend"] or before.get("cases") != json.loads(
                 json.dumps(sweep["cases"])):
             raise SceneError("--out", f"{out} holds another sweep (or the same on backend "

@@ -170,7 +170,7 @@ class FastBackend(Backend):
         c = int(self.st[K.ST_CUR])
         y = np.concatenate([self.X[c], self.V[c], self.A[c],
                             [self.sc[K.SC_DVISC], self.sc[K.SC_POWER]]])
-        self._snapshot = {"t": float(self.output_times()[i_out]), "y": y,
+        self._snapshot = {"t": float(self._out_times[i_out]), "y": y,
                           "closed": self.closed.copy(), "d_hyst": float(self.sc[K.SC_DHYST]),
                           "h_last": self.dt, "armed_out": np.zeros(0, dtype=bool),
                           "post_event": False, "i_out": int(i_out)}
@@ -190,7 +190,7 @@ class FastBackend(Backend):
         """Integrate the scene; yield a Frame at every output time (see the module doc)."""
         cfg, advance = self.kernel
         wall0 = _time.perf_counter()
-        out_times = self.output_times()
+        out_times = self._out_times = self.output_times()  # once: _snap reads it every frame
         n = self.model.n
         self._alloc()
         args = lambda: (self.closed, self.pr, self.tab)  # noqa: E731
