@@ -271,6 +271,9 @@ def resolve(raw: dict) -> dict:
             if name not in SCHEMA[sec]:
                 raise SceneError(f"{sec}.{name}", f"unknown key; {sec} allows "
                                  + ", ".join(SCHEMA[sec]))
+    # a key whose value is None is not given (a resolved scene stores absent keys as None, and
+    # callers re-resolve modified copies of it)
+    raw = {sec: {k: v for k, v in table.items() if v is not None} for sec, table in raw.items()}
     data = defaults()
     for sec, table in raw.items():
         data[sec].update(table)

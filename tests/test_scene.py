@@ -30,3 +30,16 @@ def test_with_overrides_rejects_bad_key_naming_it(key):
     with pytest.raises(SceneError) as exc2:
         load_scene("micro-star", [(key, 1.0)])
     assert str(exc2.value) == str(exc.value)
+
+
+@pytest.mark.parametrize("name", ["macro-hertz", "hard/jkr-force", "hard/dmt", "micro-star"])
+def test_a_resolved_scene_resolves_again_to_itself(name):
+    """Resolved data stores absent keys as None (lambda of a jkr, dmt or hertz scene); resolving
+    it again, as native_lammps.probe_force does with a modified copy, gives the same data."""
+    from mdgran.scene import resolve
+
+    sc = load_scene(name)
+    data = {k: dict(v) for k, v in sc.data.items()}
+    if data["contact"].get("fc") is not None:  # a scene that gives fc: lambda is only its default
+        data["contact"].pop("lambda", None)
+    assert resolve(data) == sc.data
