@@ -49,6 +49,7 @@ import mdgran
 from mdgran.contact import law_from_contact_table
 from mdgran.invariants import check_run, matched_events
 from mdgran.scene import load_scene
+from mdgran.simulation import LEDGER_EXCEEDED
 
 RESULTS = Path(__file__).parent / "results"
 #: fast backend step: at most this / (1 + |v0|)^0.5 (stiffer contacts at larger impulses)
@@ -292,8 +293,10 @@ def bad_kinds(rec: dict, backend: str) -> list:
         kinds.append("ledger")
     if not r["hysteresis_ok"]:
         kinds.append("hysteresis")
-    if not r["status"].startswith("complete"):
-        kinds.append("failed" if r["status"].startswith("failed") else "error")
+    if r["status"].startswith("failed"):
+        kinds.append("failed")
+    elif not r["status"].startswith(("complete", LEDGER_EXCEEDED)):  # that one is "ledger"
+        kinds.append("error")
     for key in ("first_event_ok", "pair_events_ok"):
         if rec.get(f"{backend}_{key}") is False:
             kinds.append(key.replace("_ok", "_wrong"))

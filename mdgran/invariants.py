@@ -58,17 +58,6 @@ def frame_violations(model, frame, tol: float = STATE_TOL) -> list:
     return closed_below_off(model, frame, tol) + interpenetration(model, frame, tol)
 
 
-def total_energy(model, frame) -> float:
-    """The ledger's ``total_energy`` of one frame (units eta p)."""
-    return model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
-                        frame.dissipated_hysteresis)["total_energy"]
-
-
-def ledger_ok(error: float, bound: float) -> bool:
-    """Ledger closure: the largest relative ledger error of a run is within ``bound``."""
-    return bool(np.isfinite(error) and error <= bound)
-
-
 def hysteresis_check(law, opens: int, d_hysteresis: float, rtol: float = 1e-6,
                      atol: float = 1e-12) -> tuple:
     """``D_hysteresis`` against ``opens * V(delta_off)`` (units eta p).
@@ -94,8 +83,8 @@ class RunCheck:
     ``counts`` counts every violating (frame, contact) by kind.  ``events`` is the run's event
     list ``(time, contact, kind)`` (kind 1 close, 0 open).  ``ledger_error`` is the largest
     ``|total - total(t=0)| / E_imp`` over the frames, ``ledger_bound`` the backend's declared
-    bound of it (:meth:`~mdgran.backends.base.Backend.ledger_bound`).  ``status`` is ``"complete"``,
-    ``"failed: ..."`` (the backend raised :class:`IntegrationError`) or ``"error: ..."``.
+    bound of it (:meth:`~mdgran.backends.base.Backend.ledger_bound`).  ``status`` is the driver's
+    (``"complete"``, ``"ledger-exceeded: ..."``, ``"failed: ..."``) or ``"error: ..."``.
     """
 
     backend: str
@@ -129,41 +118,47 @@ def _record(res: RunCheck, t: float, found: list):
             res.violations.append((t, num, kind, delta))
 
 
+class _FrameCheck:
+    """A reporter for :func:`mdgran.simulation.run`: the state invariant and the events of
+    every frame, into a :class:`RunCheck`."""
+
+    def __init__(self, res: RunCheck, model, tol: float):
+        self.res, self.model, self.tol = res, model, tol
+
+    def report(self, frame, ledger):
+        res = self.res
+        res.frames += 1
+        res.events += [(e.time, e.contact, e.kind) for e in frame.events]
+        _record(res, frame.time, frame_violations(self.model, frame, self.tol))
+        res.d_hysteresis = frame.dissipated_hysteresis
+
+    def close(self, status):
+        pass
+
+
 def check_run(scene, backend: str, tol: float = STATE_TOL, hyst_rtol: float = 1e-6,
               **options) -> RunCheck:
-    """Run ``scene`` on ``backend`` (``options`` go to the backend) and check every frame.
+    """Run ``scene`` on ``backend`` through the driver (``options`` go to the backend) and
+    check every frame.
 
-    State invariant at ``tol`` (units of p) on every frame; ledger error relative to
-    ``E_imp``; at the end :func:`hysteresis_check` at ``hyst_rtol``.  A run that raises is
-    recorded in ``status`` with the frames checked so far.
+    State invariant at ``tol`` (units of p) on every frame; the ledger error and its bound are
+    the driver's (``max |E - E0| / E_imp``, :meth:`~mdgran.backends.base.Backend.ledger_bound`),
+    and so is ``status``; at the end :func:`hysteresis_check` at ``hyst_rtol``.  A run that
+    raises anything else is recorded as ``"error: ..."`` with the frames checked so far.
     """
-    from .backends.base import IntegrationError
-    from .simulation import make_backend
+    from .chain import model_from_scene
+    from .simulation import run
 
     res = RunCheck(backend)
     wall0 = _time.perf_counter()
-    b = make_backend(scene, backend, **options)
-    model = b.model
-    scale = scene.impulse_energy or 1.0
-    e0 = None
-    term_max = 0.0  # largest |ledger term|: the scale of the bound's round-off floor
+    model = model_from_scene(scene)
     try:
-        for frame in b.frames():
-            res.frames += 1
-            res.events += [(e.time, e.contact, e.kind) for e in frame.events]
-            _record(res, frame.time, frame_violations(model, frame, tol))
-            led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
-                               frame.dissipated_hysteresis)
-            e = led["total_energy"]
-            e0 = e if e0 is None else e0
-            res.ledger_error = max(res.ledger_error, abs(e - e0) / scale)
-            term_max = max(term_max, max(abs(v) for v in led.values()))
-            res.d_hysteresis = frame.dissipated_hysteresis
-    except IntegrationError as exc:
-        res.status = f"failed: {exc}"
+        result = run(scene, backend, keep=False, raise_errors=False,
+                     reporters=[_FrameCheck(res, model, tol)], **options)
+        res.status = result.status
+        res.ledger_error, res.ledger_bound = result.max_ledger_error, result.ledger_bound
     except Exception as exc:  # noqa: BLE001 - a crash is a finding, recorded not raised
         res.status = f"error: {type(exc).__name__}: {exc}"
-    res.ledger_bound = b.ledger_bound(scale, term_max)
     res.hysteresis = hysteresis_check(model.law, res.opens, res.d_hysteresis, hyst_rtol)
     res.wall_s = _time.perf_counter() - wall0
     return res
