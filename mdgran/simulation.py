@@ -138,7 +138,7 @@ def make_backend(scene, backend: str, **options):
 
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,
         reporters=(), raise_errors: bool = True, checkpoint_every: float | None = None,
-        resume: bool = False, **options) -> RunResult:
+        resume: bool = False, collective: bool = True, **options) -> RunResult:
     """Run ``scene`` on ``backend``; write ``out`` (H5MD) if given; return the result.
 
     A failure during the run (:class:`IntegrationError`) closes the output with every frame so
@@ -150,8 +150,14 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
     in-memory trajectory then holds only the resumed frames; the file holds all).  A run whose
     frames cannot fit in memory or on disk is refused first (:func:`check_resources`).
+
+    ``collective`` (default True): under ``mpiexec`` every rank runs this same call (LAMMPS
+    splits the chain over them), so rank 0 alone writes ``out`` and shows progress.  False: this
+    process runs a run of its own (a sweep case on an MPI worker rank) and writes its own ``out``
+    whatever its rank.
     """
-    check_resources(scene, out if mpi_rank() == 0 else None, keep)
+    writes = not collective or mpi_rank() == 0
+    check_resources(scene, out if writes else None, keep)
     b = make_backend(scene, backend, **options)
     model = b.model
     reps = list(reporters)
@@ -159,7 +165,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     if mem is not None:
         reps.append(mem)
     writer = None
-    if mpi_rank() != 0:  # under mpiexec: rank 0 alone writes and reports
+    if not writes:  # a collective run under mpiexec: rank 0 alone writes and reports
         out, progress = None, False
     if out is not None:
         try:
