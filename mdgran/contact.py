@@ -28,13 +28,19 @@ paper's displacement rule, default) or the tensile force maximum ``f = fc`` (``s
 "force"``, as LAMMPS's ``granular jkr`` does).  On opening the closed contact's energy
 ``V(delta_off)`` is lost; for the displacement rule that is the loop energy ``W``.
 
+The law depends on the adhesion through ``fc`` alone (``fc = -2`` DMT, ``-1.5`` JKR).  From
+the Maugis parameter ``lambda`` it follows by a rule (:data:`FC_RULES`, scene key
+``contact.fc_rule``): the paper's Carpick-Ogletree-Salmeron relation (``"cos"``, default) or
+the exact Maugis-Dugdale pull-off (``"maugis-dugdale"``, :func:`maugis_dugdale_pulloff`).
+
 The Hertz law is ``f = delta_+^(3/2)``, ``V = (2/5) delta_+^(5/2)``; it opens and closes at
 ``delta = 0`` with no force jump.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -42,29 +48,126 @@ import numpy as np
 LAWS = ("schwarz", "jkr", "dmt", "hertz")
 #: Snap-off rules.
 SNAP_OFF_RULES = ("displacement", "force")
+#: Rules giving the pull-off force ``fc`` from the Maugis parameter: ``"cos"`` the
+#: Carpick-Ogletree-Salmeron fit the paper uses (default), ``"maugis-dugdale"`` Maugis's
+#: equations solved exactly (:func:`maugis_dugdale_pulloff`).
+FC_RULES = ("cos", "maugis-dugdale")
 
 FC_DMT = -2.0
 FC_JKR = -1.5
 NEWTON_STEPS = 7
 
 
-def fc_from_lambda(lam: float) -> float:
+def fc_from_lambda(lam: float, rule: str = "cos") -> float:
     """Transition parameter ``fc = Fc / (pi R w)`` from the Maugis parameter ``lambda``.
 
-    Carpick-Ogletree-Salmeron relation as the paper states it:
+    ``rule = "cos"`` (default): the Carpick-Ogletree-Salmeron relation as the paper states it,
     ``lambda = -0.924 ln(1 - 1.02 alpha)`` with ``alpha = sqrt(-3 - 6 / fc)``, so
     ``alpha = (1 - exp(-lambda / 0.924)) / 1.02`` and ``fc = -6 / (alpha^2 + 3)``.
-    ``lambda = 0`` gives DMT (``fc = -2``); ``lambda -> inf`` gives ``fc -> -1.5147``.
+    ``lambda = 0`` gives DMT (``fc = -2``); ``lambda -> inf`` gives ``fc -> -1.5147``, not JKR.
+    It overstates the exact pull-off by 6.6-10.8 % for lambda in [0.3, 1.5] (-1.852 against
+    -1.672 at lambda = 0.64).
+
+    ``rule = "maugis-dugdale"``: the exact pull-off of Maugis's model,
+    :func:`maugis_dugdale_pulloff` (-2 at ``lambda = 0``, -> -1.5 as ``lambda -> inf``).
     """
-    alpha = (1.0 - math.exp(-lam / 0.924)) / 1.02
-    return -6.0 / (alpha * alpha + 3.0)
+    if rule == "cos":
+        alpha = (1.0 - math.exp(-lam / 0.924)) / 1.02
+        return -6.0 / (alpha * alpha + 3.0)
+    if rule == "maugis-dugdale":
+        return maugis_dugdale_pulloff(lam)
+    raise ValueError(f"fc rule must be one of {FC_RULES}, not {rule!r}")
 
 
-def lambda_from_fc(fc: float) -> float:
-    """Inverse of :func:`fc_from_lambda` (``inf`` where ``fc`` is beyond the fit's range)."""
+def lambda_from_fc(fc: float, rule: str = "cos") -> float:
+    """Inverse of :func:`fc_from_lambda` for ``rule`` (``inf`` where ``fc`` is beyond the
+    rule's range: above -1.5147 for ``"cos"``, at -1.5 for ``"maugis-dugdale"``)."""
+    if rule == "maugis-dugdale":
+        if fc <= FC_DMT:
+            return 0.0
+        if fc >= FC_JKR:
+            return math.inf
+        from scipy.optimize import brentq
+
+        lo, hi = -27.0, 34.0  # ln lambda; the pull-off is within 1e-15 of -2 and -1.5 beyond
+        g = lambda u: maugis_dugdale_pulloff(math.exp(u)) - fc  # noqa: E731
+        if g(lo) >= 0.0:
+            return math.exp(lo)
+        if g(hi) <= 0.0:
+            return math.inf
+        return math.exp(brentq(g, lo, hi, xtol=1e-14, rtol=1e-15))
+    if rule != "cos":
+        raise ValueError(f"fc rule must be one of {FC_RULES}, not {rule!r}")
     alpha = math.sqrt(max(-3.0 - 6.0 / fc, 0.0))
     arg = 1.0 - 1.02 * alpha
     return math.inf if arg <= 0.0 else -0.924 * math.log(arg)
+
+
+def _md_curve(s, lam: float):
+    """Maugis's contact radius ``A`` and load ``P`` along the curve parametrized by
+    ``s = sqrt(m^2 - 1)`` (see :func:`maugis_dugdale_pulloff`); arrays in, arrays out."""
+    s = np.asarray(s, dtype=float)
+    m = np.sqrt(1.0 + s * s)
+    at = np.arctan(s)
+    # s - atan(s), without the cancellation at small s
+    s_at = np.where(s < 1e-3, s**3 / 3.0 - s**5 / 5.0 + s**7 / 7.0, s - at)
+    a2 = 0.5 * lam * (s_at + s * s * at)  # = lam/2 [s + (m^2 - 2) atan s]
+    a1 = 4.0 * lam * lam / 3.0 * (s * at - s * s / (m + 1.0))  # = 4 lam^2/3 [s atan s - m + 1]
+    A = 2.0 / (a1 + np.sqrt(a1 * a1 + 4.0 * a2))  # positive root of a2 A^2 + a1 A - 1 = 0
+    P = A**3 - lam * A * A * (s + m * m * at)
+    return A, P
+
+
+@lru_cache(maxsize=4096)
+def maugis_dugdale_pulloff(lam: float) -> float:
+    """Exact pull-off force of the Maugis-Dugdale model, in units of ``pi R w`` (= ``eta``, the
+    unit of ``fc``), under load control: the least load on the equilibrium curve.
+
+    Maugis (1992) in the notation of Johnson and Greenwood (1997, J. Colloid Interface Sci.
+    192, 326): contact radius ``A = a (K / (pi w R^2))^(1/3)``, load ``P = F / (pi w R)``,
+    ``m = c / a`` the ratio of the cohesive zone's outer radius to the contact radius, and the
+    Maugis parameter ``lambda = 2 sigma_0 (R / (pi w K^2))^(1/3)`` (with the Dugdale stress
+    ``sigma_0 = w / (0.97 D0)`` this is ``2.06 / D0 (R w^2 / (pi K^2))^(1/3)``, physics.md),
+    ``K = (4/3) E*``::
+
+        (lambda A^2 / 2) [sqrt(m^2-1) + (m^2-2) atan sqrt(m^2-1)]
+            + (4 lambda^2 A / 3) [sqrt(m^2-1) atan sqrt(m^2-1) - m + 1] = 1
+        P = A^3 - lambda A^2 [sqrt(m^2-1) + m^2 atan sqrt(m^2-1)]
+
+    The first equation is a quadratic in ``A`` with positive coefficients for every ``m > 1``,
+    so each ``s = sqrt(m^2-1)`` in ``(0, inf)`` gives one ``A`` exactly (its positive root),
+    and the curve runs from ``A -> inf`` (``s -> 0``) to ``A -> 0`` (``s -> inf``, where
+    ``P -> -(pi/2) lambda (m A)^2``).  ``P`` along it has one minimum (checked for lambda in
+    [1e-10, 1e13]); it is bracketed on a grid in ``ln s`` and located by Brent's method to
+    round-off.  The units need no conversion: ``fc`` of the Schwarz law is ``Fc / (pi R w)``
+    with the same ``R`` and ``w``, and the law depends on ``lambda`` only through ``fc``.
+
+    Values: -2 at ``lambda = 0`` (DMT), -1.8156 at 0.3, -1.6719 at 0.64, -1.5556 at 1.5,
+    -1.5 + 0.164 / lambda^2 for large ``lambda`` (JKR).
+    """
+    lam = float(lam)
+    if not lam >= 0.0 or math.isinf(lam):
+        if math.isinf(lam) and lam > 0:
+            return FC_JKR
+        raise ValueError(f"lambda must be a finite number >= 0, not {lam}")
+    if lam < 1e-12:  # within 1e-17 of DMT
+        return FC_DMT
+    if lam > 1e15:  # within 1e-30 of JKR
+        return FC_JKR
+    from scipy.optimize import minimize_scalar
+
+    u = np.linspace(-40.0, 40.0, 4001)
+    _, P = _md_curve(np.exp(u), lam)
+    i = int(np.clip(np.argmin(P), 1, len(u) - 2))
+    res = minimize_scalar(lambda x: float(_md_curve(math.exp(x), lam)[1]),
+                          bounds=(u[i - 1], u[i + 1]), method="bounded",
+                          options={"xatol": 1e-12})
+    # the end of the curve, A -> 0 with c = m A finite: (pi/4) lam c^2 + k c = 1,
+    # k = (4 lam^2 / 3)(pi/2 - 1), and P -> -(pi/2) lam c^2 (above the minimum, kept as a guard)
+    k = 4.0 * lam * lam / 3.0 * (math.pi / 2.0 - 1.0)
+    c = 2.0 / (k + math.sqrt(k * k + math.pi * lam))
+    p_end = -0.5 * math.pi * lam * c * c
+    return min(max(float(min(res.fun, P[i], p_end)), FC_DMT), FC_JKR)
 
 
 @dataclass(frozen=True)
@@ -74,11 +177,18 @@ class ContactLaw:
     ``kind`` is ``"schwarz"`` (JKR and DMT are Schwarz laws with ``fc = -1.5`` and ``-2``) or
     ``"hertz"``.  ``fc`` is ignored for Hertz.  All methods take and return nondimensional
     values and accept numpy arrays.
+
+    ``fc_rule`` and ``lambda_source`` only record how ``fc`` was obtained (the rule that made it
+    from the Maugis parameter; where that parameter came from: ``"scene"``, ``"material"`` or
+    ``"default"``, ``None`` if ``fc`` was given or fixed by the law); they do not enter the
+    law's values, its comparison or its repr.
     """
 
     kind: str = "schwarz"
     fc: float = -1.8518
     snap_off: str = "displacement"
+    fc_rule: str | None = field(default=None, compare=False, repr=False)
+    lambda_source: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if self.kind not in ("schwarz", "hertz"):
@@ -87,6 +197,8 @@ class ContactLaw:
             raise ValueError(f"fc must lie in [-2, -1.5], not {self.fc}")
         if self.snap_off not in SNAP_OFF_RULES:
             raise ValueError(f"snap_off must be one of {SNAP_OFF_RULES}, not {self.snap_off!r}")
+        if self.fc_rule is not None and self.fc_rule not in FC_RULES:
+            raise ValueError(f"fc_rule must be one of {FC_RULES}, not {self.fc_rule!r}")
 
     # ---- constants of the law -------------------------------------------------------------
     @property
@@ -236,6 +348,8 @@ class ContactLaw:
             "loop_energy": self.loop_energy,
             "delta_eq": self.delta_eq,
             "stiffness_eq": self.stiffness_eq,
+            "fc_rule": self.fc_rule,
+            "lambda_source": self.lambda_source,
         }
 
     def tabulate(self, n: int = 2001, delta_max: float = 10.0):
@@ -256,8 +370,10 @@ class ContactLaw:
         return d, self.force(d), self.energy(d)
 
 
-def law_from_contact_table(contact: dict) -> ContactLaw:
-    """Build the law from a scene's ``[contact]`` table (already validated)."""
+def law_from_contact_table(contact: dict, lambda_source: str | None = None) -> ContactLaw:
+    """Build the law from a scene's ``[contact]`` table (already validated).  ``fc`` comes from
+    ``contact.fc`` if given, else from ``contact.lambda`` by ``contact.fc_rule`` (default
+    ``"cos"``); ``lambda_source`` is recorded on the law (see :class:`ContactLaw`)."""
     law = contact.get("law", "schwarz")
     snap = contact.get("snap_off", "displacement")
     if law == "hertz":
@@ -268,7 +384,11 @@ def law_from_contact_table(contact: dict) -> ContactLaw:
         return ContactLaw("schwarz", FC_DMT, snap)
     if contact.get("fc") is not None:
         return ContactLaw("schwarz", float(contact["fc"]), snap)
-    return ContactLaw("schwarz", fc_from_lambda(float(contact.get("lambda", 0.64))), snap)
+    rule = contact.get("fc_rule") or "cos"
+    lam = contact.get("lambda")
+    lam = 0.64 if lam is None else float(lam)
+    return ContactLaw("schwarz", fc_from_lambda(lam, rule), snap, fc_rule=rule,
+                      lambda_source=lambda_source)
 
 
 def table_error(law: ContactLaw, n: int, delta_max: float = 10.0, kind: str = "linear") -> dict:

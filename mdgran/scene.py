@@ -1,14 +1,25 @@
 """Scenes: TOML files with the contract's nondimensional keys, validated, with overrides.
 
-A scene is a built-in name (``mdgran scenes`` lists them; files in ``mdgran/scenes/``) or a
-path to a TOML file.  Missing keys take the defaults below; ``--set a.b=VALUE`` overrides any
-key (VALUE is read as a TOML value, or as a bare string).  Every problem raises
-:class:`SceneError` naming the key and what is allowed, before anything runs.
+A scene is a built-in name (``mdgran scenes`` lists them; files in ``mdgran/scenes/``), a
+path to a TOML file, or a nested mapping with the TOML's keys.  Missing keys take the defaults
+of :data:`SCHEMA`; ``--set a.b=VALUE`` overrides any key (VALUE is read as a TOML value, or as
+a bare string).  Every problem raises :class:`SceneError` naming the key and what is allowed,
+before anything runs.  ``docs/scenes.md`` explains the rules with a worked SI example;
+``docs/scene_keys.md`` lists every key, generated from :data:`SCHEMA` by
+:func:`key_reference` (``python reference/make_scene_keys.py``).
 
-An optional ``[material]`` table (SI: ``diameter`` m, ``E`` Pa, ``nu``, ``w`` J/m^2, ``density``
-kg/m^3, ``modulus`` = "table" | "text", or ``K`` Pa) gives the scales; the SI keys
-``substrate.k1_si`` (N/m), ``substrate.k3_si`` (N/m^3), ``contact.damping_si`` (Ns/m),
-``impulse.velocity_si`` (m/s) and ``run.duration_si`` (s) then set the nondimensional ones.
+**SI and nondimensional keys.**  Keys of ``[material]`` are SI (the beads' material).  In the
+other sections a key ending in ``_si`` is SI and needs a ``[material]``; every other key is
+nondimensional (units of physics.md section 1).  A value may be given one way only: ``k1`` or
+``k1_si``, not both.  The SI keys are ``substrate.k1_si`` (N/m), ``substrate.k3_si``
+(N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s).
+
+**A material means what it says.**  A ``[material]`` table must be complete: ``diameter`` (m),
+``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
+("table", default, or "text") and ``D0`` (m, default 0.165e-9, the paper's) have defaults.
+It then sets ``contact.lambda`` too (its Maugis parameter, :attr:`mdgran.units.Scales.
+maugis_lambda`), unless the scene gives ``contact.lambda`` or ``contact.fc`` itself.  Where each
+value came from is in :attr:`Scene.sources` (and ``lambda_source`` in ``mdgran info``).
 
 **Limits** (:data:`LIMITS`).  Besides being finite, a few values have ranges outside which the
 backends cannot work or the numbers are not representable; they are checked on the
@@ -28,22 +39,28 @@ nondimensional values, so also after the SI conversion (an error then names both
   density in [1, 1e5] kg/m^3, D0 in [1e-12, 1e-6] m (physical materials; far outside, the
   scales overflow or underflow).
 
-``contact.lambda`` is used by law ``schwarz`` only; a scene that gives it with another law is
-refused (``--set contact.law=jkr`` on a scene file that gives lambda drops the file's lambda).
+``contact.lambda`` and ``contact.fc_rule`` are used by law ``schwarz`` only (and not when
+``contact.fc`` is given); a scene that gives them where they have no effect is refused
+(``--set contact.law=jkr`` on a scene file that gives lambda drops the file's lambda).
 """
 from __future__ import annotations
 
 import copy
 import math
+import sys
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from .contact import LAWS, SNAP_OFF_RULES, ContactLaw, law_from_contact_table
+from .contact import FC_RULES, LAWS, SNAP_OFF_RULES, ContactLaw, law_from_contact_table
+from .units import D0_DEFAULT, missing_material_keys, scales_from_material
 
 SCENE_DIR = Path(__file__).parent / "scenes"
 
@@ -70,59 +87,120 @@ LIMITS = {
     "material.D0": (1e-12, 1e-6),
 }
 
-# key -> (default, kind, constraint text); kinds are checked in _check_value
+class Key(NamedTuple):
+    """One scene key: its default, its kind (checked by ``_check_value``), what is allowed (the
+    text of error messages), its unit, and a one-line description.  ``shown`` replaces the
+    default in the key reference where the default depends on the scene."""
+
+    default: object
+    kind: object
+    allowed: str
+    unit: str = ""
+    doc: str = ""
+    shown: str | None = None
+
+
+_FREQ = "(stiffer, the substrate period falls below 6e-3 time units)"
+_MAT = "required in a [material]"
+
+#: section -> key -> :class:`Key`.  The one source of the keys, their defaults, ranges and units
+#: (``docs/scene_keys.md`` is generated from it).
 SCHEMA = {
     "chain": {
-        "n": (20, "int>=1", "an integer >= 1"),
-        "boundary": ("fixed", ("fixed", "free"), "'fixed' or 'free'"),
-        "initial_gap": (0.0, "float>=0", "a finite number >= 0"),
+        "n": Key(20, "int>=1", "an integer >= 1", "", "number of moving beads"),
+        "boundary": Key("fixed", ("fixed", "free"), "'fixed' or 'free'", "",
+                        "'fixed': wall beads at both ends; 'free': no walls"),
+        "initial_gap": Key(0.0, "float>=0", "a finite number >= 0", "p",
+                           "> 0: every contact starts open, separated by this gap"),
     },
     "contact": {
-        "law": ("schwarz", LAWS, "one of " + ", ".join(repr(x) for x in LAWS)),
-        "lambda": (0.64, "float>=0", "a finite number >= 0 (Maugis parameter)"),
-        "fc": (None, "fc", "a number in [-2, -1.5] (units of pi R w)"),
-        "damping": (0.013285, "float>=0", "a number in [0, 1e3] (heavier damping needs steps "
-                    "below 1e-3 time units)"),
-        "snap_off": ("displacement", SNAP_OFF_RULES, "'displacement' or 'force'"),
-        "damping_si": (None, "float>=0?", "a finite number >= 0 in Ns/m (needs [material])"),
+        "law": Key("schwarz", LAWS, "one of " + ", ".join(repr(x) for x in LAWS), "",
+                   "contact law; jkr and dmt are Schwarz with fc = -1.5 and -2"),
+        "lambda": Key(0.64, "float>=0", "a finite number >= 0 (Maugis parameter)", "",
+                      "Maugis parameter (schwarz only); not given: the [material]'s, else "
+                      "0.64 (the paper's)", "0.64, or from [material]"),
+        "fc": Key(None, "fc", "a number in [-2, -1.5] (units of pi R w)", "eta = pi R w",
+                  "pull-off force, instead of contact.lambda (schwarz only)", "from lambda"),
+        "fc_rule": Key("cos", FC_RULES, "one of " + ", ".join(repr(x) for x in FC_RULES), "",
+                       "how fc follows from lambda: 'cos' the paper's Carpick-Ogletree-Salmeron "
+                       "fit, 'maugis-dugdale' Maugis's equations solved exactly (schwarz, "
+                       "without contact.fc)"),
+        "damping": Key(0.013285, "float>=0", "a number in [0, 1e3] (heavier damping needs "
+                       "steps below 1e-3 time units)", "sqrt(m eta / p)",
+                       "C_hat, unilateral: acts on closed contacts only"),
+        "snap_off": Key("displacement", SNAP_OFF_RULES, "'displacement' or 'force'", "",
+                        "'displacement': open at delta_min (the paper's); 'force': at the "
+                        "tensile force maximum f = fc (LAMMPS granular jkr's)"),
+        "damping_si": Key(None, "float>=0?", "a finite number >= 0 in Ns/m (needs [material])",
+                          "Ns/m", "contact.damping in SI (needs [material])"),
     },
     "substrate": {
-        "k1": (0.012107, "float>=0", "a number in [0, 1e6] (stiffer, the substrate period "
-               "falls below 6e-3 time units)"),
-        "k3": (0.0, "float>=0", "a number in [0, 1e6] (stiffer, the substrate period falls "
-               "below 6e-3 time units)"),
-        "k1_si": (None, "float>=0?", "a finite number >= 0 in N/m (needs [material])"),
-        "k3_si": (None, "float>=0?", "a finite number >= 0 in N/m^3 (needs [material])"),
+        "k1": Key(0.012107, "float>=0", f"a number in [0, 1e6] {_FREQ}", "eta / p",
+                  "linear substrate stiffness K1_hat"),
+        "k3": Key(0.0, "float>=0", f"a number in [0, 1e6] {_FREQ}", "eta / p^3",
+                  "cubic substrate stiffness K3_hat"),
+        "k1_si": Key(None, "float>=0?", "a finite number >= 0 in N/m (needs [material])",
+                     "N/m", "substrate.k1 in SI (needs [material])"),
+        "k3_si": Key(None, "float>=0?", "a finite number >= 0 in N/m^3 (needs [material])",
+                     "N/m^3", "substrate.k3 in SI (needs [material])"),
     },
     "impulse": {
-        "bead": (1, "int>=1", "an integer from 1 to chain.n"),
-        "velocity": (1.0, "float", "a number with |v| <= 1e3 (p per time unit; faster "
-                     "impulses leave the precision the event location needs)"),
-        "velocity_si": (None, "float?", "a finite number in m/s (needs [material])"),
+        "bead": Key(1, "int>=1", "an integer from 1 to chain.n", "",
+                    "bead that gets the impulse (1-based)"),
+        "velocity": Key(1.0, "float", "a number with |v| <= 1e3 (p per time unit; faster "
+                        "impulses leave the precision the event location needs)", "p q",
+                        "v0, positive from bead 1 towards bead n; E_imp = v0^2 / 2"),
+        "velocity_si": Key(None, "float?", "a finite number in m/s (needs [material])", "m/s",
+                           "impulse.velocity in SI (needs [material])"),
     },
     "run": {
-        "duration": (400.0, "float>0", "a finite number > 0"),
-        "output_interval": (0.1, "float>0", "a finite number > 0, at most run.duration"),
-        "tolerance": (1e-8, "tol", "a number in [1e-14, 1e-3]"),
-        "dt": (0.01, "float>0", "a finite number > 0 (step of fixed-step backends)"),
-        "duration_si": (None, "float>0?", "a finite number > 0 in s (needs [material])"),
+        "duration": Key(400.0, "float>0", "a finite number > 0", "1/q", "time simulated"),
+        "output_interval": Key(0.1, "float>0", "a finite number > 0, at most run.duration",
+                               "1/q", "time between stored frames"),
+        "tolerance": Key(1e-8, "tol", "a number in [1e-14, 1e-3]", "",
+                         "accuracy target of adaptive backends (reference)"),
+        "dt": Key(0.01, "float>0", "a finite number > 0 (step of fixed-step backends)", "1/q",
+                  "step of fixed-step backends (fast, lammps)"),
+        "duration_si": Key(None, "float>0?", "a finite number > 0 in s (needs [material])", "s",
+                           "run.duration in SI (needs [material])"),
     },
     "output": {
-        "positions": (True, "bool", "true or false (store H5MD position; false for long chains)"),
+        "positions": Key(True, "bool", "true or false (store H5MD position; false for long "
+                         "chains)", "", "store the H5MD position element"),
     },
     "material": {
-        "diameter": (None, "float>0?", "a number in [1e-9, 10] (m)"),
-        "E": (None, "float>0?", "a number in [1e3, 1e13] (Pa)"),
-        "nu": (None, "nu?", "a number in [0, 0.5)"),
-        "w": (None, "float>0?", "a number in [1e-6, 1e3] (J/m^2)"),
-        "density": (None, "float>0?", "a number in [1, 1e5] (kg/m^3)"),
-        "modulus": ("table", ("table", "text"), "'table' (K = E/(2(1-nu^2))) or 'text'"),
-        "K": (None, "float>0?", "a number in [1e3, 1e13] (Pa)"),
-        "D0": (None, "float>0?", "a number in [1e-12, 1e-6] (m)"),
+        "diameter": Key(None, "float>0?", "a number in [1e-9, 10] (m)", "m", "bead diameter",
+                        _MAT),
+        "E": Key(None, "float>0?", "a number in [1e3, 1e13] (Pa)", "Pa",
+                 "Young's modulus (K follows by material.modulus)", _MAT + " (or K)"),
+        "nu": Key(None, "nu?", "a number in [0, 0.5)", "", "Poisson's ratio", _MAT),
+        "w": Key(None, "float>0?", "a number in [1e-6, 1e3] (J/m^2)", "J/m^2",
+                 "work of adhesion", _MAT),
+        "density": Key(None, "float>0?", "a number in [1, 1e5] (kg/m^3)", "kg/m^3",
+                       "bead density", _MAT),
+        "modulus": Key("table", ("table", "text"), "'table' (K = E/(2(1-nu^2))) or 'text'", "",
+                       "K from E and nu: 'table' E/(2(1-nu^2)), reproduces the paper's Table I "
+                       "and lambda 0.64; 'text' (2/3)E/(1-nu^2), as the paper's text writes"),
+        "K": Key(None, "float>0?", "a number in [1e3, 1e13] (Pa)", "Pa",
+                 "contact modulus, instead of E and modulus", "instead of E"),
+        "D0": Key(None, "float>0?", "a number in [1e-12, 1e-6] (m)", "m",
+                  "interfacial contact separation (enters the Maugis parameter only)",
+                  f"{D0_DEFAULT!r} (with a material)"),
     },
     "meta": {
-        "description": ("", "str", "a string"),
+        "description": Key("", "str", "a string", "", "what the scene is; first line is listed "
+                           "by mdgran scenes"),
     },
+}
+
+#: [material] keys that make a material (modulus and D0 alone refine one, they make none)
+MATERIAL_KEYS = ("diameter", "E", "K", "nu", "w", "density")
+
+#: key given -> keys of the same quantity given another way, which it replaces in overrides
+OTHER_WAYS = {
+    "contact.fc": ("lambda", "fc_rule"), "contact.lambda": ("fc",),
+    "contact.fc_rule": ("fc",),
+    "material.K": ("E", "modulus"), "material.E": ("K",), "material.modulus": ("K",),
 }
 
 
@@ -157,6 +235,9 @@ def _check_value(key: str, value, kind, allowed: str):
     value = float(value)
     if not math.isfinite(value):
         raise SceneError(key, f"must be {allowed}, not {value}")
+    if value != 0.0 and abs(value) < sys.float_info.min:
+        raise SceneError(key, f"{value!r} is subnormal (below 2.2e-308 in magnitude), which "
+                         "LAMMPS cannot read; give 0 or a normal number")
     base = kind.rstrip("?")
     bad = ((base == "float>=0" and value < 0) or (base == "float>0" and value <= 0)
            or (base == "fc" and not -2.0 <= value <= -1.5)
@@ -169,7 +250,7 @@ def _check_value(key: str, value, kind, allowed: str):
 
 
 def defaults() -> dict:
-    return {sec: {k: v[0] for k, v in keys.items()} for sec, keys in SCHEMA.items()}
+    return {sec: {k: v.default for k, v in keys.items()} for sec, keys in SCHEMA.items()}
 
 
 def parse_override(text: str):
@@ -197,21 +278,40 @@ def builtin_scenes() -> dict:
 
 @dataclass(frozen=True)
 class Scene:
-    """A resolved, validated scene: ``data`` holds every key (defaults filled in)."""
+    """A resolved, validated scene: ``data`` holds every key (defaults filled in, SI keys
+    converted to the nondimensional ones, ``contact.lambda`` derived from the material where
+    the scene does not give it).
+
+    ``given`` is what the scene gave (file or mapping, overrides applied), from which
+    :meth:`with_overrides` resolves again; ``sources`` says where each value of ``data`` came
+    from: ``"scene"`` (given), ``"default"``, ``"material"`` (derived from ``[material]``), or
+    the SI key it was converted from (``"substrate.k1_si"``); ``None`` for a key the scene does
+    not use.  Both are ``None`` for a Scene made directly from resolved data."""
 
     name: str
     data: dict = field(repr=False)
+    given: dict | None = field(default=None, repr=False, compare=False)
+    sources: dict | None = field(default=None, repr=False, compare=False)
 
     @property
     def law(self) -> ContactLaw:
-        return law_from_contact_table(self.data["contact"])
+        return law_from_contact_table(self.data["contact"], self.lambda_source)
+
+    @property
+    def lambda_source(self) -> str | None:
+        """Where ``contact.lambda`` came from: ``"scene"``, ``"material"``, ``"default"``;
+        ``None`` if the law does not use it (``contact.fc`` given, or a law other than
+        schwarz)."""
+        if self.data["contact"].get("lambda") is None:
+            return None
+        if self.sources is None:
+            return "scene"  # made from resolved data: every value is as given
+        return self.sources.get("contact.lambda")
 
     @property
     def scales(self):
-        from .units import scales_from_material
-
         mat = self.data.get("material", {})
-        return scales_from_material(mat) if mat.get("diameter") is not None else None
+        return scales_from_material(mat, fill=None) if mat.get("diameter") is not None else None
 
     @property
     def impulse_energy(self) -> float:
@@ -219,53 +319,76 @@ class Scene:
 
     def with_overrides(self, overrides) -> "Scene":
         """This scene with ``(key, value)`` overrides: the same keys and rules as
-        :func:`load_scene`'s."""
-        data = {sec: {k: v for k, v in table.items() if v is not None}
-                for sec, table in copy.deepcopy(self.data).items()}
-        if data["contact"].get("fc") is not None:  # fc was given: lambda is only the default
-            data["contact"].pop("lambda", None)
-        return Scene(self.name, resolve(apply_overrides(data, overrides)))
+        :func:`load_scene`'s (a value the scene derived, such as lambda from the material, is
+        derived again)."""
+        if self.given is not None:
+            data = copy.deepcopy(self.given)
+        else:
+            data = {sec: {k: v for k, v in table.items() if v is not None}
+                    for sec, table in copy.deepcopy(self.data).items()}
+        return _make_scene(self.name, apply_overrides(data, overrides))
 
     def to_toml(self) -> str:
         return dump_toml(self.data)
 
 
+def _make_scene(name: str, raw: dict) -> Scene:
+    data, sources = _resolve(raw)
+    return Scene(name, data, given=copy.deepcopy(raw), sources=sources)
+
+
 def apply_overrides(raw: dict, overrides) -> dict:
     """Set ``(key, value)`` overrides in unresolved scene data (in place; returned).  An
-    override of one way of giving a value (``contact.fc``/``lambda``, ``X_si``/``X``)
-    replaces the other way; an override of ``contact.law`` with another law than schwarz drops
-    the ``lambda`` and ``fc`` the scene file gives (only schwarz uses them)."""
+    override of one way of giving a value (``contact.fc``/``lambda``, ``X_si``/``X``,
+    ``material.K``/``E``) replaces the other way (:data:`OTHER_WAYS`); an override of
+    ``contact.law`` with another law than schwarz drops the ``lambda``, ``fc`` and ``fc_rule``
+    the scene file gives (only schwarz uses them)."""
     given = set()
     for key, value in overrides:
         _set_key(raw, key, value)
         given.add(key)
         sec, name = key.split(".")
-        other = {"contact.fc": "lambda", "contact.lambda": "fc"}.get(key) or (
-            name[:-3] if name.endswith("_si") else f"{name}_si")
-        raw.get(sec, {}).pop(other, None)
+        others = OTHER_WAYS.get(key) or (
+            (name[:-3],) if name.endswith("_si") else (f"{name}_si",))
+        for other in others:
+            raw.get(sec, {}).pop(other, None)
     if raw.get("contact", {}).get("law", "schwarz") != "schwarz" and "contact.law" in given:
-        for name in ("lambda", "fc"):
+        for name in ("lambda", "fc", "fc_rule"):
             if f"contact.{name}" not in given:
                 raw["contact"].pop(name, None)
     return raw
 
 
 def _set_key(data: dict, key: str, value):
+    if not isinstance(key, str):
+        raise SceneError(str(key), "keys are strings SECTION.NAME")
     parts = key.split(".")
     if len(parts) != 2 or parts[0] not in SCHEMA:
         raise SceneError(key, "keys are SECTION.NAME with SECTION one of " + ", ".join(SCHEMA))
     sec, name = parts
     if name not in SCHEMA[sec]:
         raise SceneError(key, f"unknown key; {sec} allows " + ", ".join(SCHEMA[sec]))
-    data.setdefault(sec, {})[name] = value
+    table = data.setdefault(sec, {})
+    if not isinstance(table, dict):
+        raise SceneError(sec, "must be a table")
+    table[name] = value
 
 
 def resolve(raw: dict) -> dict:
-    """Fill defaults, check every key and value, derive SI keys; returns the resolved data."""
+    """Fill defaults, check every key and value, derive SI keys and the material's lambda;
+    returns the resolved data (:func:`load_scene` also keeps where each value came from)."""
+    return _resolve(raw)[0]
+
+
+def _resolve(raw: dict):
+    """``(data, sources)``: the resolved data and where each value came from (see
+    :class:`Scene`)."""
+    if not isinstance(raw, Mapping):
+        raise SceneError("SCENE", "a scene is a mapping of sections to tables")
     for sec, table in raw.items():
         if sec not in SCHEMA:
-            raise SceneError(sec, "unknown section; allowed: " + ", ".join(SCHEMA))
-        if not isinstance(table, dict):
+            raise SceneError(str(sec), "unknown section; allowed: " + ", ".join(SCHEMA))
+        if not isinstance(table, Mapping):
             raise SceneError(sec, "must be a table")
         for name in table:
             if name not in SCHEMA[sec]:
@@ -278,19 +401,38 @@ def resolve(raw: dict) -> dict:
     for sec, table in raw.items():
         data[sec].update(table)
     for sec, keys in SCHEMA.items():
-        for name, (_, kind, allowed) in keys.items():
-            data[sec][name] = _check_value(f"{sec}.{name}", data[sec][name], kind, allowed)
-    _derive_si(data, raw)
+        for name, key in keys.items():
+            data[sec][name] = _check_value(f"{sec}.{name}", data[sec][name], key.kind,
+                                           key.allowed)
+    sources = {f"{sec}.{name}": ("scene" if name in raw.get(sec, {}) else "default")
+               for sec, keys in SCHEMA.items() for name in keys}
+    scales = _check_material(data, raw, sources)
+    _derive_si(data, raw, scales, sources)
     c, ch = data["contact"], data["chain"]
+    given_c = raw.get("contact", {})
     if c["fc"] is not None and c["law"] != "schwarz":
         raise SceneError("contact.fc", f"applies to law 'schwarz' only (law is {c['law']!r})")
-    if c["fc"] is not None and "lambda" in raw.get("contact", {}):
+    if c["fc"] is not None and "lambda" in given_c:
         raise SceneError("contact.fc", "give contact.lambda or contact.fc, not both")
     if c["law"] != "schwarz":
-        if "lambda" in raw.get("contact", {}):
-            raise SceneError("contact.lambda", f"not used by law {c['law']!r} (only by "
-                             "'schwarz'); leave it out")
-        c["lambda"] = None  # not part of this scene (nor of its stored TOML)
+        for name in ("lambda", "fc_rule"):
+            if name in given_c:
+                raise SceneError(f"contact.{name}", f"not used by law {c['law']!r} (only by "
+                                 "'schwarz'); leave it out")
+        c["lambda"] = c["fc_rule"] = None  # not part of this scene (nor of its stored TOML)
+    elif c["fc"] is not None:
+        if "fc_rule" in given_c:
+            raise SceneError("contact.fc_rule", "sets how fc follows from contact.lambda; with "
+                             "contact.fc given, leave it out")
+        c["lambda"] = c["fc_rule"] = None
+    elif "lambda" not in given_c and scales is not None:
+        c["lambda"] = _check_value("contact.lambda", scales.maugis_lambda,
+                                   SCHEMA["contact"]["lambda"].kind,
+                                   SCHEMA["contact"]["lambda"].allowed)
+        sources["contact.lambda"] = "material"
+    for name in ("lambda", "fc", "fc_rule"):
+        if c[name] is None:
+            sources[f"contact.{name}"] = None
     if ch["boundary"] == "free" and ch["n"] < 2:
         raise SceneError("chain.n", "must be >= 2 for a free chain")
     if data["impulse"]["bead"] > ch["n"]:
@@ -301,22 +443,69 @@ def resolve(raw: dict) -> dict:
         raise SceneError("run.output_interval", f"must be at most run.duration = {r['duration']}")
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
-    return data
+    return data, sources
 
 
-def _derive_si(data: dict, raw: dict):
+def _check_material(data: dict, raw: dict, sources: dict):
+    """A [material] is complete or absent; returns its scales (None without one)."""
+    mat, given = data["material"], raw.get("material", {})
+    if not any(k in given for k in MATERIAL_KEYS):
+        # modulus = "table" alone is what every resolved scene stores (its default)
+        for name in ("modulus", "D0"):
+            if name in given and not (name == "modulus" and given[name] == "table"):
+                raise SceneError(f"material.{name}", "refines a [material] and needs one: "
+                                 "diameter, E (or K), nu, w, density")
+        mat["D0"] = None
+        for name in SCHEMA["material"]:
+            if name != "modulus":
+                sources[f"material.{name}"] = None
+        return None
+    missing = missing_material_keys(mat)
+    if missing:
+        key, what = (f"material.{missing[0]}", "missing") if len(missing) == 1 else (
+            "material", "missing " + ", ".join(missing))
+        raise SceneError(key, what + ": a [material] gives "
+                         "diameter (m), E (Pa) or K (Pa), nu, w (J/m^2) and density (kg/m^3); "
+                         f"only modulus ('table') and D0 ({D0_DEFAULT!r} m) have defaults")
+    if "K" in given and "E" in given:
+        raise SceneError("material.K", "give material.E (K then follows by material.modulus) "
+                         "or material.K, not both")
+    if "K" in given and "modulus" in given:
+        raise SceneError("material.modulus", "sets K from E; with material.K given, leave "
+                         "it out")
+    if "K" in given:
+        mat["modulus"] = None
+        sources["material.modulus"] = sources["material.E"] = None
+    else:
+        sources["material.K"] = None
+    if mat["D0"] is None:
+        mat["D0"] = D0_DEFAULT
+    try:
+        scales = scales_from_material(mat, fill=None)
+        for name in ("p", "stiffness", "damping", "time", "velocity", "energy",
+                     "maugis_lambda"):
+            value = getattr(scales, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ArithmeticError(name)
+    except (ArithmeticError, ValueError) as exc:  # pragma: no cover - the limits prevent it
+        raise SceneError("material", f"its scales cannot be represented ({exc})") from None
+    return scales
+
+
+def _derive_si(data: dict, raw: dict, scales, sources: dict):
     si = {("substrate", "k1_si"): ("substrate", "k1", "stiffness", 1),
           ("substrate", "k3_si"): ("substrate", "k3", "stiffness", 3),
           ("contact", "damping_si"): ("contact", "damping", "damping", 1),
           ("impulse", "velocity_si"): ("impulse", "velocity", "velocity", 1),
           ("run", "duration_si"): ("run", "duration", "time", 1)}
+    for sec, name in si:
+        sources[f"{sec}.{name}"] = None  # consumed (or absent): data holds the plain key
     given = [k for k in si if data[k[0]][k[1]] is not None]
     if not given:
         return
-    if data["material"]["diameter"] is None:
+    if scales is None:
         sec, name = given[0]
         raise SceneError(f"{sec}.{name}", "needs a [material] table with a diameter")
-    scales = Scene("", data).scales
     for (sec, name) in given:
         tsec, tname, unit, power = si[(sec, name)]
         if tname in raw.get(tsec, {}):
@@ -324,17 +513,37 @@ def _derive_si(data: dict, raw: dict):
         value = data[sec][name] / getattr(scales, unit)
         if power == 3:  # K3 x^3: K3_hat = K3 p^2 / (eta/p)
             value = data[sec][name] * scales.p**2 / scales.stiffness
-        _, kind, allowed = SCHEMA[tsec][tname]
+        key = SCHEMA[tsec][tname]
         try:  # the converted value obeys the nondimensional key's rules and limits
-            value = _check_value(f"{tsec}.{tname}", value, kind, allowed)
+            value = _check_value(f"{tsec}.{tname}", value, key.kind, key.allowed)
         except SceneError as exc:
             raise SceneError(f"{sec}.{name}", f"{data[sec][name]:g} gives {exc}") from None
         data[tsec][tname] = value
         data[sec][name] = None  # consumed: the resolved scene holds the nondimensional key
+        sources[f"{tsec}.{tname}"] = f"{sec}.{name}"
 
 
-def load_scene(spec: str, overrides=()) -> Scene:
-    """Load a built-in scene by name or a TOML file by path; apply ``(key, value)`` overrides."""
+def load_scene(spec, overrides=(), name: str | None = None) -> Scene:
+    """A scene from a built-in name, a path to a TOML file, a nested mapping with the TOML's
+    keys (``{"chain": {"n": 20}, "material": {...}}``; named ``name`` or "custom"), or a
+    :class:`Scene` (returned as is, or with the overrides applied); ``(key, value)``
+    overrides are applied first.  Problems raise :class:`SceneError` naming the key."""
+    if isinstance(spec, Scene):
+        return spec.with_overrides(overrides) if overrides else spec
+    if isinstance(spec, Mapping):
+        raw = {}
+        for sec, table in spec.items():
+            if not isinstance(sec, str):
+                raise SceneError(str(sec), "section names are strings")
+            if not isinstance(table, Mapping):
+                raise SceneError(sec, "must be a table (a mapping of keys to values)")
+            raw[sec] = copy.deepcopy(dict(table))  # the caller's mapping is left as it was
+        return _make_scene(name or "custom", apply_overrides(raw, overrides))
+    if isinstance(spec, os.PathLike):
+        spec = os.fspath(spec)
+    if not isinstance(spec, str):
+        raise SceneError("SCENE", "must be a built-in scene name, a path to a .toml file, a "
+                         f"mapping or a Scene, not {type(spec).__name__}")
     scenes = builtin_scenes()
     try:
         spec.encode("utf-8")
@@ -342,14 +551,14 @@ def load_scene(spec: str, overrides=()) -> Scene:
         raise SceneError("SCENE", f"{spec!r}: the path is not valid UTF-8 (the scene's name "
                          "goes into the output file); rename the file") from None
     if spec in scenes:
-        path, name = scenes[spec], spec
+        path, stem = scenes[spec], spec
     else:
-        path, name = Path(spec), Path(spec).stem
+        path, stem = Path(spec), Path(spec).stem
         if not path.suffix == ".toml" or not path.is_file():
             raise SceneError("SCENE", f"{spec!r} is neither a built-in scene ("
                              + ", ".join(scenes) + ") nor a readable .toml file")
     raw = read_toml(path, "SCENE")
-    return Scene(name, resolve(apply_overrides(raw, overrides)))
+    return _make_scene(name or stem, apply_overrides(raw, overrides))
 
 
 def read_toml(path: Path, key: str) -> dict:
@@ -389,5 +598,80 @@ def dump_toml(data: dict) -> str:
             continue
         lines.append(f"[{sec}]")
         lines += [f"{k} = {_toml_value(v)}" for k, v in items]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _kind_name(kind) -> str:
+    if isinstance(kind, tuple):
+        return "string"
+    if kind == "bool":
+        return "boolean"
+    if kind == "str":
+        return "string"
+    if kind.startswith("int"):
+        return "integer"
+    return "number"
+
+
+def _num(x: float) -> str:
+    s = f"{x:g}"
+    return s.replace("e+0", "e").replace("e-0", "e-").replace("e+", "e") if abs(x) >= 1e4 \
+        or (x and abs(x) < 1e-4) else s
+
+
+def _range_text(sec: str, name: str, kind) -> str:
+    """The allowed values of a key, from its kind and :data:`LIMITS`."""
+    if isinstance(kind, tuple):
+        return ", ".join(f'"{x}"' for x in kind)
+    lim = LIMITS.get(f"{sec}.{name}")
+    base = kind.rstrip("?")
+    if lim is not None:
+        if base == "float" and lim[0] == -lim[1]:
+            return f"\\|v\\| <= {_num(lim[1])}"
+        return f"[{_num(lim[0])}, {_num(lim[1])}]"
+    return {"int>=1": ">= 1" if f"{sec}.{name}" != "impulse.bead" else "1 to chain.n",
+            "float>=0": ">= 0", "float>0": "> 0", "float": "finite", "fc": "[-2, -1.5]",
+            "tol": "[1e-14, 1e-3]", "nu": "[0, 0.5)", "bool": "true, false",
+            "str": "any string"}[base]
+
+
+def key_reference() -> str:
+    """The scene-key reference (Markdown) generated from :data:`SCHEMA` and :data:`LIMITS`:
+    ``docs/scene_keys.md`` is this text (``python reference/make_scene_keys.py`` writes it, and
+    a test fails when the file differs)."""
+    def cell(text) -> str:
+        return str(text).replace("|", "\\|")
+
+    lines = [
+        "# Scene keys",
+        "",
+        "<!-- Generated by `python reference/make_scene_keys.py` from `mdgran.scene.SCHEMA`",
+        "     and `LIMITS`; do not edit by hand (tests/test_material.py fails when this file",
+        "     differs from what the script writes). -->",
+        "",
+        "Every key a scene (TOML file, mapping, or `--set SECTION.KEY=VALUE`) may give. The",
+        "rules (SI and nondimensional keys, what a `[material]` derives) are in",
+        "[scenes.md](scenes.md). `[material]` keys and keys ending in `_si` are SI; every other",
+        "key is nondimensional, in the units of physics.md section 1: force `eta = pi R w`,",
+        "length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1; \"-\" is a pure",
+        "number. Values must also be finite; \"range\" is what the checks in `mdgran/scene.py`",
+        "allow (an SI key's converted value must fit its plain key's range).",
+        "",
+    ]
+    for sec, keys in SCHEMA.items():
+        lines += [f"## [{sec}]", "",
+                  "| key | type | default | range | unit | meaning |",
+                  "|---|---|---|---|---|---|"]
+        for name, key in keys.items():
+            if key.shown is not None:
+                default = key.shown
+            elif key.default is None:
+                default = "not set"
+            else:
+                default = "`" + _toml_value(key.default) + "`"
+            lines.append(f"| `{sec}.{name}` | {_kind_name(key.kind)} | {cell(default)} | "
+                         f"{_range_text(sec, name, key.kind)} | {cell(key.unit or '-')} | "
+                         f"{cell(key.doc)} |")
         lines.append("")
     return "\n".join(lines)

@@ -16,6 +16,10 @@ alumina), but its Table I and its Maugis parameter 0.64 are reproduced only with
 ``K = E / (2 (1 - nu^2))`` (176.8 GPa).  The paper's results were computed with the latter, so
 it is the default (``modulus = "table"``); ``modulus = "text"`` takes the formula as written,
 and a material may give ``K`` (Pa) directly.
+
+**Names.**  Every scale is an attribute of :class:`Scales` under the name ``mdgran info``
+prints it with (``eta_N``, ``p_m``, ``time_unit_s``, ...: :data:`INFO_KEYS`), and under a
+short name (``eta``, ``p``, ``time``, ...) as well.
 """
 from __future__ import annotations
 
@@ -23,6 +27,15 @@ import math
 from dataclasses import dataclass
 
 MODULUS_CONVENTIONS = ("table", "text")
+
+#: Default interfacial contact separation D0 (m), the paper's value; it enters only the Maugis
+#: parameter.
+D0_DEFAULT = 0.165e-9
+
+#: What :meth:`Scales.as_dict` (and so ``mdgran info``) prints, in order; each is an attribute.
+INFO_KEYS = ("diameter_m", "K_Pa", "mass_kg", "eta_N", "p_m", "stiffness_scale_N_per_m",
+             "damping_scale_Ns_per_m", "time_unit_s", "velocity_unit_m_per_s", "energy_unit_J",
+             "maugis_lambda")
 
 #: The paper's alumina beads (Sec. II): E, nu, Hamaker constant, contact separation, density
 #: (3900 kg/m^3 reproduces Table I column 3 to 4 figures).
@@ -51,7 +64,7 @@ class Scales:
     K: float  # Pa, contact modulus
     w: float  # J/m^2
     density: float  # kg/m^3
-    D0: float = 0.165e-9  # m, interfacial contact separation (for the Maugis parameter)
+    D0: float = D0_DEFAULT  # m, interfacial contact separation (for the Maugis parameter)
 
     @property
     def R(self) -> float:
@@ -95,27 +108,51 @@ class Scales:
         """``2.06 / D0 (R w^2 / (pi K^2))^(1/3)`` (0.64 for the paper's micro beads)."""
         return 2.06 / self.D0 * (self.R * self.w**2 / (math.pi * self.K**2)) ** (1.0 / 3.0)
 
+    # the same scales under the names mdgran info prints them with (INFO_KEYS)
+    diameter_m = property(lambda self: self.diameter, doc="Bead diameter (m).")
+    K_Pa = property(lambda self: self.K, doc="Contact modulus K (Pa).")
+    mass_kg = property(lambda self: self.mass, doc="Bead mass (kg).")
+    eta_N = property(lambda self: self.eta, doc="Force unit eta = pi R w (N).")
+    p_m = property(lambda self: self.p, doc="Length unit p (m).")
+    stiffness_scale_N_per_m = property(lambda self: self.stiffness,
+                                       doc="Stiffness unit eta / p (N/m).")
+    damping_scale_Ns_per_m = property(lambda self: self.damping,
+                                      doc="Damping unit sqrt(m eta / p) (Ns/m).")
+    time_unit_s = property(lambda self: self.time, doc="Time unit 1/q = sqrt(m p / eta) (s).")
+    velocity_unit_m_per_s = property(lambda self: self.velocity,
+                                     doc="Velocity unit p q (m/s).")
+    energy_unit_J = property(lambda self: self.energy, doc="Energy unit eta p (J).")
+
     def as_dict(self) -> dict:
-        return {
-            "diameter_m": self.diameter,
-            "K_Pa": self.K,
-            "mass_kg": self.mass,
-            "eta_N": self.eta,
-            "p_m": self.p,
-            "stiffness_scale_N_per_m": self.stiffness,
-            "damping_scale_Ns_per_m": self.damping,
-            "time_unit_s": self.time,
-            "velocity_unit_m_per_s": self.velocity,
-            "energy_unit_J": self.energy,
-            "maugis_lambda": self.maugis_lambda,
-        }
+        """Every scale by its :data:`INFO_KEYS` name (attributes of the same names)."""
+        return {key: getattr(self, key) for key in INFO_KEYS}
 
 
-def scales_from_material(mat: dict) -> Scales:
-    """Scales from a scene's ``[material]`` table (keys: diameter, E, nu, w, density,
-    modulus, optional K and D0); missing keys take the paper's alumina values."""
+def missing_material_keys(mat: dict) -> list:
+    """The keys a complete ``[material]`` table lacks: diameter, nu, w, density, and E unless
+    K is given (``modulus`` and ``D0`` have defaults)."""
+    need = ("diameter", "E", "nu", "w", "density")
+    return [k for k in need if mat.get(k) is None and not (k == "E" and mat.get("K") is not None)]
+
+
+def scales_from_material(mat: dict, fill: dict | None = ALUMINA) -> Scales:
+    """Scales from a ``[material]`` table (keys: diameter, E, nu, w, density, modulus, optional
+    K and D0; ``K`` replaces E and modulus; D0 defaults to :data:`D0_DEFAULT`).
+
+    Keys the table lacks are taken from ``fill``, by default the paper's alumina
+    (:data:`ALUMINA`), a convenience for Python use (``scales_from_material({"diameter":
+    2.5e-6})`` is the paper's micro bead).  Scenes do not use it: a scene's ``[material]``
+    must be complete (:func:`mdgran.scene.resolve` says which keys are missing), and it is
+    converted with ``fill=None``, which raises ``ValueError`` naming the missing keys.
+    """
+    if fill is None:
+        missing = missing_material_keys(mat)
+        if missing:
+            raise ValueError("material lacks " + ", ".join(missing))
+        fill = {"D0": D0_DEFAULT}
+
     def get(key):
-        return float(mat[key]) if mat.get(key) is not None else ALUMINA[key]
+        return float(mat[key]) if mat.get(key) is not None else fill[key]
 
     K = mat.get("K")
     K = float(K) if K is not None else contact_modulus(get("E"), get("nu"),
