@@ -144,7 +144,8 @@ def scene_info(scene) -> dict:
     d = scene.data
     info = {"scene": scene.name, **law.describe()}
     if law.kind == "schwarz":
-        info["contact_lambda"] = lambda_from_fc(law.fc)  # lambda the law's fc stands for
+        # the lambda that the law's fc stands for, under the scene's fc rule
+        info["contact_lambda"] = lambda_from_fc(law.fc, law.fc_rule or "cos")
     info.update({
         "n": d["chain"]["n"], "boundary": d["chain"]["boundary"],
         "k1": d["substrate"]["k1"], "k3": d["substrate"]["k3"],
@@ -180,9 +181,32 @@ def cmd_info(args) -> int:
     return 0
 
 
+def exit_status(exc: KeyboardInterrupt) -> int:
+    """128 + the signal's number: 130 for Ctrl-C (SIGINT), 143 for SIGTERM."""
+    import signal
+
+    return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
+def interrupted_line(exc: KeyboardInterrupt, out: str) -> str:
+    """What an interrupted ``run`` kept, and how to go on."""
+    from .checkpoint import has_checkpoint
+    from .simulation import partial_path
+
+    name = getattr(exc, "signum", None)
+    name = "SIGINT" if name is None else str(exc)
+    partial = partial_path(out)
+    if partial.exists() and has_checkpoint(partial):
+        return (f"interrupted ({name}); {partial} holds a checkpoint: run the same command "
+                "with --resume to continue")
+    return (f"interrupted ({name}); nothing was kept under {out} (no checkpoint: "
+            "--checkpoint 0, a backend that cannot checkpoint, or none written yet)")
+
+
 def cmd_run(args) -> int:
     from .backends.base import IntegrationError
     from .simulation import LEDGER_EXCEEDED, run
+    from .storage import StorageError
 
     check_out_file(args.out, args.scene)
     scene = _load(args)
@@ -194,6 +218,10 @@ def cmd_run(args) -> int:
                   checkpoint_every=args.checkpoint if args.checkpoint > 0 else None)
     except IntegrationError as exc:  # pragma: no cover - run() reports via status
         return _fail(str(exc), 1)
+    except StorageError as exc:
+        return _fail(str(exc), 1)
+    except KeyboardInterrupt as exc:
+        return _fail(interrupted_line(exc, args.out), exit_status(exc))
     if res.error is not None:
         return _fail(f"run failed ({args.out} holds the frames so far): {res.error}", 1)
     from .simulation import mpi_rank
@@ -284,7 +312,10 @@ def cmd_report(args) -> int:
 
 # ---- parser ----------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = _Parser(prog="mdgran", description="Adhesive micro-granular chain simulations.")
+    p.add_argument("--version", action="version", version=f"mdgran {__version__}")
     sub = p.add_subparsers(dest="command", parser_class=_Parser)
     sub.required = True
 
@@ -357,21 +388,36 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: library parameter -> the command-line flag that sets it (errors name what the user typed)
+FLAGS = {"out": "--out", "resume": "--resume", "backend": "--backend",
+         "executor": "--executor", "workers": "--workers"}
+
+
+def flag_message(exc) -> str:
+    """A SceneError's line, with a library parameter's name replaced by its flag."""
+    flag = FLAGS.get(getattr(exc, "key", None))
+    text = str(exc)
+    return text if flag is None else flag + text[len(exc.key):]
+
+
 def main(argv=None) -> int:
     from .scene import SceneError
     from .simulation import BackendUnavailable
 
+    from .signals import terminate_as_interrupt
+
+    terminate_as_interrupt()  # SIGTERM (a scheduler's time limit) ends a run like Ctrl-C
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
     except UsageError as exc:
         return _fail(str(exc), 2)
     except SceneError as exc:
-        return _fail(str(exc), 2)
+        return _fail(flag_message(exc), 2)
     except BackendUnavailable as exc:
         return _fail(str(exc), 2)
-    except KeyboardInterrupt:
-        return _fail("interrupted", 130)
+    except KeyboardInterrupt as exc:
+        return _fail(f"interrupted ({exc or 'SIGINT'})", exit_status(exc))
     except BrokenPipeError:  # output piped into head & co.
         return 0
 

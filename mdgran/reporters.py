@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import checkpoint
+from .storage import OutputLock, StorageError, abandon, reason
 from .trajectory import LEDGER_NAMES, Trajectory
 
 H5MD_BLOCK = 512  # frames buffered in memory between writes
@@ -77,21 +79,31 @@ class MemoryReporter:
 
 
 class H5MDWriter:
-    """Writes the contract's H5MD 1.1 layout, frame by frame, atomically."""
+    """Writes the contract's H5MD 1.1 layout, frame by frame, atomically.
+
+    The writer holds ``NAME.lock`` (:class:`~mdgran.storage.OutputLock`) from its start to
+    its close, so a second run on the same name is refused.  A write the file system refuses
+    (full disk, quota) raises :class:`~mdgran.storage.StorageError` after the temporary is
+    removed; the requested name is never touched."""
 
     def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
                  stats_source=None, checkpoint_every: float | None = None, state_source=None,
                  resume: bool = False):
         """``checkpoint_every`` (seconds of wall time) makes the run resumable: the file is
-        filled under the fixed name ``NAME.h5.partial`` with a ``/checkpoint`` group (the
-        backend's ``state_source()`` at the last written frame), which an interrupted or
-        killed run leaves behind; ``resume=True`` opens it, drops the frames written after the
-        checkpoint, and exposes the state as ``resume_state``."""
+        filled under the fixed name ``NAME.h5.partial`` with a checkpoint (the backend's
+        ``state_source()`` at the last written frame; :mod:`mdgran.checkpoint`), which an
+        interrupted or killed run leaves behind; ``resume=True`` verifies it (backend, scene,
+        checksums), drops the frames written after it, and exposes the state as
+        ``resume_state``.  Without ``resume``, an existing ``NAME.h5.partial`` is refused
+        rather than overwritten (:class:`~mdgran.checkpoint.CheckpointError`)."""
         import h5py
 
         self.path = Path(path)
+        if self.path.is_symlink():  # write where the link points; the link stays
+            self.path = Path(os.path.realpath(self.path))
         self.checkpoint_every = checkpoint_every
         self.state_source = state_source
+        self.backend_name = backend_name
         if checkpoint_every is not None:
             self.tmp = self.path.with_name(f"{self.path.name}.partial")
         else:
@@ -100,45 +112,80 @@ class H5MDWriter:
         self.model_n = int(scene.data["chain"]["n"])
         self.positions = scene.data["output"]["positions"] if positions is None else positions
         self.stats_source = stats_source
+        self.f = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.lock = OutputLock(self.path)
         self._buf = []
         self._events = []
         self._frames = 0
         self._last_step = None
         self._last_checkpoint = _time.perf_counter()
+        self._digest = checkpoint.DataDigest()
         self.resume_state = None
         self.resume_e0 = None
         self.resume_max_error = 0.0
         self.resume_term_max = 0.0  # largest |ledger term| so far (the round-off floor's scale)
-        if resume and self.tmp.exists() and self._has_checkpoint():
-            self.f = h5py.File(self.tmp, "r+")
-            self._open_existing()
-        else:
-            self.f = h5py.File(self.tmp, "w")
-            self._init_file(backend_name)
+        try:
+            if resume and self.tmp.exists():
+                self._resume()
+            else:
+                if checkpoint_every is not None and self.tmp.exists():
+                    raise checkpoint.CheckpointError(
+                        f"{self.tmp} holds an unfinished run: resume it (--resume), or delete "
+                        "it to start afresh")
+                self.f = self._guard(h5py.File, self.tmp, "w")
+                self._guard(self._init_file, backend_name)
+        except BaseException:
+            self.lock.release()
+            raise
 
-    def _has_checkpoint(self) -> bool:
+    def _guard(self, fn, *args):
+        """Call ``fn``; a write the file system refuses ends the run as a StorageError."""
+        try:
+            return fn(*args)
+        except (OSError, RuntimeError) as exc:
+            if isinstance(exc, StorageError):
+                raise
+            if self.f is not None:
+                abandon(self.f, self.tmp, forget=self._forget_datasets)
+                self.f = None
+            else:
+                self.tmp.unlink(missing_ok=True)
+            self.lock.release()
+            raise StorageError(f"cannot write {self.path}: {reason(exc)}; nothing was written "
+                               f"under that name and the temporary {self.tmp.name} was "
+                               "removed") from None
+
+    def _resume(self):
+        """Verify the checkpoint in ``NAME.partial`` (read-only), then reopen it to go on."""
         import h5py
 
-        try:
-            with h5py.File(self.tmp, "r") as f:
-                return "checkpoint" in f
-        except OSError:  # killed before the file was complete: nothing to resume
-            return False
-
-    def _open_existing(self):
-        f = self.f
-        if f["parameters"].attrs["scene"] != self.scene.to_toml():
-            f.close()
-            raise ValueError(f"{self.tmp} holds a run of another scene; delete it or use "
-                             "another --out")
-        cp = f["checkpoint"]
-        meta = json.loads(cp.attrs["meta"])
-        state = {k: meta[k] for k in ("t", "d_hyst", "h_last", "post_event", "i_out")}
-        for k in ("y", "closed", "armed_out"):
-            state[k] = cp[k][()]
+        state, meta, digest = checkpoint.load(
+            self.tmp, backend=self.backend_name, scene_toml=self.scene.to_toml(),
+            counts=self._rows)
         self.resume_state = state
+        self._digest = digest
         self._frames = int(meta["frames"])
+        self.f = self._guard(h5py.File, self.tmp, "r+")
+        self._guard(self._open_existing, int(meta["events"]))
+
+    def _series_paths(self, f) -> list:
+        chain = [f"particles/chain/{name}" for name in ("displacement", "velocity", "position")
+                 if f"particles/chain/{name}" in f]
+        return chain + [f"observables/{name}" for name in LEDGER_NAMES]
+
+    def _rows(self, meta) -> dict:
+        """Dataset path -> rows that a checkpoint with ``meta`` continues (checksummed)."""
+        import h5py
+
+        with h5py.File(self.tmp, "r") as f:
+            groups = self._series_paths(f)
+        rows = {f"{g}/{k}": int(meta["frames"]) for g in groups for k in ("step", "time", "value")}
+        rows.update({f"events/{k}": int(meta["events"]) for k in ("time", "contact", "kind")})
+        return rows
+
+    def _open_existing(self, events: int):
+        f = self.f
         chain, obs = f["particles/chain"], f["observables"]
         self._series = {name: {k: chain[f"{name}/{k}"] for k in ("step", "time", "value")}
                         for name in ("displacement", "velocity", "position") if name in chain}
@@ -150,7 +197,7 @@ class H5MDWriter:
                 ds.resize(self._frames, axis=0)
         self._ev = {k: f[f"events/{k}"] for k in ("time", "contact", "kind")}
         for ds in self._ev.values():
-            ds.resize(int(meta["events"]), axis=0)
+            ds.resize(events, axis=0)
         tot = self._series["total_energy"]["value"][()]
         self.resume_e0 = float(tot[0])
         self.resume_max_error = float(np.max(np.abs(tot - tot[0]))) if len(tot) else 0.0
@@ -233,10 +280,10 @@ class H5MDWriter:
         self._events.extend(frame.events)
         self._last_step = frame.step
         if len(self._buf) >= H5MD_BLOCK:
-            self._flush()
+            self._guard(self._flush)
         if (self.checkpoint_every is not None
                 and _time.perf_counter() - self._last_checkpoint >= self.checkpoint_every):
-            self.checkpoint()
+            self._guard(self.checkpoint)
 
     def checkpoint(self):
         """Flush every frame and store the backend's state at the last one."""
@@ -244,39 +291,37 @@ class H5MDWriter:
         if state is None or self._last_step is None or state["i_out"] != self._last_step:
             return
         self._flush()
-        if "checkpoint" in self.f:
-            del self.f["checkpoint"]
-        cp = self.f.create_group("checkpoint")
-        for k in ("y", "closed", "armed_out"):
-            cp.create_dataset(k, data=state[k])
-        meta = {k: state[k] for k in ("t", "d_hyst", "h_last", "post_event", "i_out")}
-        meta.update(frames=self._frames, events=int(self._ev["time"].shape[0]))
-        cp.attrs["meta"] = json.dumps(meta)
+        checkpoint.save(self.f, state, backend=self.backend_name,
+                        scene_toml=self.scene.to_toml(), frames=self._frames,
+                        events=int(self._ev["time"].shape[0]), data=self._digest.hexdigests())
         self.f.flush()
         self._last_checkpoint = _time.perf_counter()
 
-    def _append(self, series, steps, times, values):
+    def _append(self, path, series, steps, times, values):
         k0 = series["step"].shape[0]
         k1 = k0 + len(steps)
         for key, data in (("step", steps), ("time", times), ("value", values)):
             ds = series[key]
             ds.resize(k1, axis=0)
             ds[k0:k1] = data
+            self._digest.update(f"{path}/{key}", data, ds.dtype)
 
     def _flush(self):
         if self._buf:
             steps = np.array([b[0] for b in self._buf], dtype=np.int64)
             times = np.array([b[1] for b in self._buf])
             x = np.array([b[2] for b in self._buf])
-            self._append(self._series["displacement"], steps, times, x)
-            self._append(self._series["velocity"], steps, times,
+            chain = "particles/chain"
+            self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x)
+            self._append(f"{chain}/velocity", self._series["velocity"], steps, times,
                          np.array([b[3] for b in self._buf]))
             if self.positions:
                 pos = np.zeros(x.shape + (3,))
                 pos[..., 0] = self._rest + x * self._pos_scale
-                self._append(self._series["position"], steps, times * self._t_scale, pos)
+                self._append(f"{chain}/position", self._series["position"], steps,
+                             times * self._t_scale, pos)
             for name in LEDGER_NAMES:
-                self._append(self._series[name], steps, times,
+                self._append(f"observables/{name}", self._series[name], steps, times,
                              np.array([b[4][name] for b in self._buf]))
             self._frames += len(self._buf)
             self._buf = []
@@ -285,34 +330,47 @@ class H5MDWriter:
             k0 = self._ev["time"].shape[0]
             for key, vals in (("time", [e.time for e in ev]), ("contact", [e.contact for e in ev]),
                               ("kind", [e.kind for e in ev])):
-                self._ev[key].resize(k0 + len(ev), axis=0)
-                self._ev[key][k0:] = vals
+                ds = self._ev[key]
+                ds.resize(k0 + len(ev), axis=0)
+                ds[k0:] = vals
+                self._digest.update(f"events/{key}", vals, ds.dtype)
             self._events = []
 
     def close(self, status):
-        """Finish the file: rename it onto the requested name unless interrupted."""
+        """Finish the file: rename it onto the requested name unless interrupted (then keep
+        ``NAME.partial`` with a checkpoint at the last frame if checkpointing is on, else
+        remove the temporary)."""
         if self.f is None:
             return
         try:
             if status == "interrupted":
                 if self.checkpoint_every is not None:  # keep NAME.partial to resume from
-                    self.checkpoint()
-                    self.f.close()
+                    self._guard(self.checkpoint)
+                    self._guard(self.f.close)
                 else:
                     self.f.close()
                     self.tmp.unlink(missing_ok=True)
                 return
-            self._flush()
-            if "checkpoint" in self.f:
-                del self.f["checkpoint"]
-            par = self.f["parameters"]
-            par.attrs["status"] = status
-            if self.stats_source is not None:
-                par.attrs["backend_stats"] = json.dumps(self.stats_source(), default=float)
-            self.f.close()
+            self._guard(self._finish, status)
             os.replace(self.tmp, self.path)
         finally:
             self.f = None
+            self.lock.release()
+
+    def _finish(self, status):
+        self._flush()
+        if "checkpoint" in self.f:
+            del self.f["checkpoint"]
+        par = self.f["parameters"]
+        par.attrs["status"] = status
+        if self.stats_source is not None:
+            par.attrs["backend_stats"] = json.dumps(self.stats_source(), default=float)
+        self.f.flush()  # a full disk fails here, while the file can still be closed cleanly
+        self._forget_datasets()
+        self.f.close()
+
+    def _forget_datasets(self):
+        self._series, self._ev = {}, {}
 
 
 class ProgressReporter:

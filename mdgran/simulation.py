@@ -18,11 +18,14 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 from .backends import BACKENDS, get_backend
 from .backends.base import IntegrationError
+from .checkpoint import CheckpointError
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
 from .scene import SceneError
+from .storage import OutputLocked
 
 
 #: prefix of the status of a run whose ledger error exceeds its backend's declared bound
@@ -33,8 +36,21 @@ class BackendUnavailable(RuntimeError):
     """The backend cannot run here (for example LAMMPS is not installed): one line."""
 
 
-@dataclass
+@dataclass(repr=False)
 class RunResult:
+    """What :func:`run` (and ``mdgran.run``) returns; all values nondimensional (physics.md
+    section 1: time ``1/q``, length ``p``, energy ``eta p``).
+
+    Attributes:
+        trajectory: the frames and events in memory (:class:`~mdgran.trajectory.Trajectory`),
+            or None for ``keep=False``.
+        stats: the backend's counters (``steps``, ``events``, ``wall_time_s``, ...).
+        status: ``"complete"``, ``"failed: ..."`` or ``"ledger-exceeded: ..."``.
+        max_ledger_error: ``max |E(t) - E0| / E_imp`` over the frames (``|E0|`` if no impulse).
+        error: the failure's one-line message, or None.
+        ledger_bound: the backend's declared bound on ``max_ledger_error`` (same scale).
+    """
+
     trajectory: object
     stats: dict
     status: str
@@ -42,11 +58,30 @@ class RunResult:
     error: str | None = None
     ledger_bound: float = math.inf  # the backend's declared bound, same scale
 
+    def __repr__(self) -> str:
+        tr = self.trajectory
+        attrs = getattr(tr, "attrs", None) or {}
+        status = self.status if len(self.status) <= 60 else self.status[:57] + "..."
+        parts = ([f"scene={str(attrs['scene_name'])!r}"] if attrs.get("scene_name") else [])
+        if tr is not None:
+            parts += [f"backend={tr.backend!r}", f"status={status!r}",
+                      f"frames={len(tr.time)}", f"n={tr.n}", f"events={len(tr.ev_time)}"]
+        else:
+            parts += [f"status={status!r}", f"events={self.stats.get('events', '?')}"]
+        parts.append(f"ledger_error={self.max_ledger_error:.1e} (bound {self.ledger_bound:.1e})")
+        return f"RunResult({', '.join(parts)})"
+
 
 def ledger_status(error: float, bound: float) -> str:
     """The status of a run whose ledger error exceeds its bound (both relative to E_imp)."""
     return (f"{LEDGER_EXCEEDED}ledger error {error:.3g} of E_imp exceeds the backend's bound "
             f"{bound:.3g}")
+
+
+def partial_path(out) -> Path:
+    """The checkpoint file of a run writing ``out``: ``OUT.partial`` beside it."""
+    out = Path(out)
+    return out.with_name(f"{out.name}.partial")
 
 
 def mpi_rank() -> int:
@@ -168,12 +203,16 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     if not writes:  # a collective run under mpiexec: rank 0 alone writes and reports
         out, progress = None, False
     if out is not None:
+        if not b.can_checkpoint and not (resume and partial_path(out).exists()):
+            checkpoint_every = None  # nothing to checkpoint; a resume is refused by the writer
         try:
             writer = H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats,
                                 checkpoint_every=checkpoint_every,
                                 state_source=b.checkpoint_state, resume=resume)
-        except ValueError as exc:
-            raise SceneError("--resume", str(exc)) from None
+        except CheckpointError as exc:
+            raise SceneError("resume", str(exc)) from None
+        except OutputLocked as exc:
+            raise SceneError("out", str(exc)) from None
         reps.append(writer)
     start = writer.resume_state if writer is not None else None
     if progress:

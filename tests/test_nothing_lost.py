@@ -104,7 +104,7 @@ def test_sigkill_then_resume_matches_uninterrupted_run(tmp_path):
     import h5py
 
     with h5py.File(tmp_path / "k.h5.partial", "r") as f:  # resume has something to resume
-        assert json.loads(f["checkpoint"].attrs["meta"])["i_out"] > 0
+        assert json.loads(f["checkpoint"].attrs["meta"])["scalars"]["i_out"] > 0
     assert main([*args, "--out", str(out), "--resume", "--checkpoint", "0.2"]) == 0
     whole = tmp_path / "whole.h5"
     assert main([*args, "--out", str(whole), "--checkpoint", "0"]) == 0

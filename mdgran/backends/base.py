@@ -152,8 +152,14 @@ class Backend:
 
     def checkpoint_state(self) -> dict | None:
         """The state to continue from the last yielded frame, or None if the backend cannot
-        checkpoint (then runs are not resumable)."""
+        checkpoint (then runs are not resumable).  A flat dict of arrays and JSON scalars with
+        at least ``i_out`` (the last frame's index); stored opaquely (:mod:`mdgran.checkpoint`)
+        and handed back to :meth:`frames` as ``resume``."""
         return None
+
+    @property
+    def can_checkpoint(self) -> bool:
+        return type(self).checkpoint_state is not Backend.checkpoint_state
 
     def output_times(self) -> np.ndarray:
         run = self.scene.data["run"]

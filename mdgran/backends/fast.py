@@ -147,10 +147,17 @@ class FastBackend(Backend):
         c = self.X[int(self.st[K.ST_CUR])]
         if status == K.OUT_OF_TABLE:
             d = float(self.model.compressions(c)[j]) if 0 <= j < len(self.closed) else math.nan
+            dmax = self.table.delta_max
             if not math.isfinite(d):
                 raise IntegrationError(f"non-finite state at t = {t:.12g}, contact {num}")
+            if d < dmax:  # flagged inside the step (a trial or sub-step state), not at its end
+                raise IntegrationError(
+                    f"contact {num} left the contact table (compression beyond delta_max = "
+                    f"{dmax:g}, or not finite) inside the step ending at t = {t:.12g}; its "
+                    f"compression there is {d:.4g}: run.dt = {self.dt:g} may be too large for "
+                    "this scene")
             raise IntegrationError(f"compression {d:.4g} beyond the contact table (delta_max ="
-                                   f" {self.table.delta_max:g}) at t = {t:.12g}, contact {num}")
+                                   f" {dmax:g}) at t = {t:.12g}, contact {num}")
         if status == K.CHATTER:
             raise IntegrationError(f"contact {num} chatters at t = {t:.12g}: it switches state"
                                    f" more than {K.MAX_SWITCHES} times at one instant")
@@ -161,7 +168,7 @@ class FastBackend(Backend):
                                f"t = {t:.12g}, contact {num}")
 
     def checkpoint_state(self) -> dict:
-        """The state at the last yielded frame, in the keys the H5MD writer stores: ``y`` =
+        """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
         so a resumed run is bitwise identical), ``closed``, ``d_hyst``, ``i_out``."""
         return dict(self._snapshot)
@@ -172,8 +179,7 @@ class FastBackend(Backend):
                             [self.sc[K.SC_DVISC], self.sc[K.SC_POWER]]])
         self._snapshot = {"t": float(self._out_times[i_out]), "y": y,
                           "closed": self.closed.copy(), "d_hyst": float(self.sc[K.SC_DHYST]),
-                          "h_last": self.dt, "armed_out": np.zeros(0, dtype=bool),
-                          "post_event": False, "i_out": int(i_out)}
+                          "i_out": int(i_out)}
 
     def _frame(self, i_out, t, events) -> Frame:
         c = int(self.st[K.ST_CUR])

@@ -47,6 +47,7 @@ from .. import native_plugin
 from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
+from ..signals import deferred
 from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
@@ -341,8 +342,12 @@ class LammpsBackend(Backend):
         return fr
 
     def _advance(self, command):
+        """Run a LAMMPS command; SIGINT and SIGTERM are held until it returns (an exception
+        raised inside the Python contact callback would be dropped by ctypes and the run would
+        go on: :func:`mdgran.signals.deferred`)."""
         try:
-            self.lmp.command(command)
+            with deferred():
+                self.lmp.command(command)
         except Exception as exc:  # noqa: BLE001 - LAMMPS errors arrive as plain exceptions
             step = self._last_step if self.contact == "hook" else \
                 self.lmp.extract_global("ntimestep")

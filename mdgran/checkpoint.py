@@ -1,0 +1,157 @@
+"""Checkpoints: the backend's state at the last written frame, kept in the run's temporary
+H5MD file ``NAME.partial`` so that an interrupted run resumes bitwise identically.
+
+The state is opaque here: a flat dict from the backend's ``checkpoint_state()`` whose values
+are arrays (stored as datasets) or JSON scalars (stored in the ``meta`` attribute); only
+``i_out`` (index of the last frame) is common to every backend.  A checkpoint is the group
+``/checkpoint`` with one JSON attribute ``meta``::
+
+    {"backend": "reference", "scene_sha256": ..., "frames": 402, "events": 57,
+     "scalars": {...}, "arrays": [...], "state_sha256": ..., "data_sha256": {path: ...}}
+
+``data_sha256`` holds the SHA-256 of the first ``frames`` rows of every frame dataset (and of
+the first ``events`` events): the frames the checkpoint continues.  :func:`load` refuses with
+one line (:class:`CheckpointError`) a checkpoint of another backend or scene, a file that is
+not HDF5, and any checksum that does not match what is stored: a damaged checkpoint is never
+resumed, and it is left as it was.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+
+GROUP = "checkpoint"
+ROWS = 4096  # rows hashed at a time when a checkpoint is verified
+EMPTY = hashlib.sha256().hexdigest()
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be resumed: one line saying why (the file is kept)."""
+
+
+def scene_digest(scene_toml: str) -> str:
+    return hashlib.sha256(scene_toml.encode("utf-8")).hexdigest()
+
+
+def state_digest(scalars: dict, arrays: dict) -> str:
+    """SHA-256 of a state: its scalars (as sorted JSON), then each array's dtype, shape and
+    bytes, in name order."""
+    h = hashlib.sha256(json.dumps(scalars, sort_keys=True).encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+class DataDigest:
+    """Running SHA-256 of datasets that only grow by appended rows: hashing the rows as they
+    are appended gives the same digest as hashing the dataset's first rows at once."""
+
+    def __init__(self):
+        self._h = {}
+
+    def update(self, path: str, rows, dtype):
+        h = self._h.setdefault(path, hashlib.sha256())
+        h.update(np.ascontiguousarray(rows, dtype=dtype).tobytes())
+
+    def hexdigests(self) -> dict:
+        return {path: h.hexdigest() for path, h in self._h.items()}
+
+    @classmethod
+    def of_file(cls, f, counts: dict) -> "DataDigest":
+        """The digest of the first ``counts[path]`` rows of each dataset ``f[path]``."""
+        d = cls()
+        for path, k in counts.items():
+            ds = f[path]
+            d._h[path] = hashlib.sha256()
+            for i in range(0, k, ROWS):
+                d.update(path, ds[i:min(k, i + ROWS)], ds.dtype)
+        return d
+
+
+def split_state(state: dict):
+    arrays = {k: np.asarray(v) for k, v in state.items() if isinstance(v, np.ndarray)}
+    scalars = {k: (v.item() if isinstance(v, np.generic) else v)
+               for k, v in state.items() if k not in arrays}
+    return scalars, arrays
+
+
+def save(f, state: dict, *, backend: str, scene_toml: str, frames: int, events: int,
+         data: dict):
+    """Replace ``f``'s checkpoint by ``state`` (``data``: the frame datasets' digests)."""
+    scalars, arrays = split_state(state)
+    if GROUP in f:
+        del f[GROUP]
+    g = f.create_group(GROUP)
+    for k, a in arrays.items():
+        g.create_dataset(k, data=a)
+    meta = {"backend": backend, "scene_sha256": scene_digest(scene_toml), "frames": int(frames),
+            "events": int(events), "scalars": scalars, "arrays": sorted(arrays),
+            "state_sha256": state_digest(scalars, arrays), "data_sha256": data}
+    g.attrs["meta"] = json.dumps(meta)
+
+
+def has_checkpoint(path) -> bool:
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            return GROUP in f
+    except (OSError, RuntimeError):
+        return False
+
+
+def load(path, *, backend: str, scene_toml: str, counts) -> tuple[dict, dict, DataDigest]:
+    """Read and verify the checkpoint in the file ``path``; returns ``(state, meta, digest)``
+    where ``digest`` continues the frame datasets' running hashes.  ``counts(meta)`` gives
+    ``{dataset path: rows the checkpoint continues}``.  Raises :class:`CheckpointError`."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except (OSError, RuntimeError) as exc:
+        raise CheckpointError(f"{path} is not a readable HDF5 file ({_first_line(exc)}); it "
+                              "was kept: delete it to start afresh") from None
+    try:
+        with f:
+            if GROUP not in f:
+                raise CheckpointError(f"{path} holds no checkpoint (the run stopped before its "
+                                      "first); delete it to start afresh")
+            g = f[GROUP]
+            meta = json.loads(g.attrs["meta"])
+            if meta.get("backend") != backend:
+                raise CheckpointError(f"{path} is a checkpoint of backend "
+                                      f"{meta.get('backend')!r}, not {backend!r}: resume it on "
+                                      f"{meta.get('backend')!r}, or delete it to start afresh")
+            if meta.get("scene_sha256") != scene_digest(scene_toml):
+                raise CheckpointError(f"{path} holds a run of another scene; delete it or use "
+                                      "another output name")
+            arrays = {k: g[k][()] for k in meta["arrays"]}
+            if state_digest(meta["scalars"], arrays) != meta["state_sha256"]:
+                raise CheckpointError(f"{path}: the checkpoint's state does not match its "
+                                      "checksum (the file is damaged); it was kept")
+            want = counts(meta)
+            for p, k in want.items():
+                if p not in f or f[p].shape[0] < k:
+                    raise CheckpointError(f"{path}: {p} holds fewer rows than the checkpoint's "
+                                          f"{k} (the file is damaged); it was kept")
+            digest = DataDigest.of_file(f, want)
+            stored = meta["data_sha256"]  # a dataset never appended to has the empty digest
+            bad = sorted(p for p, h in digest.hexdigests().items() if stored.get(p, EMPTY) != h)
+            if bad:
+                raise CheckpointError(f"{path}: the stored frames do not match the checkpoint's "
+                                      f"checksum ({', '.join(bad[:3])}; the file is damaged); "
+                                      "it was kept")
+    except CheckpointError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        raise CheckpointError(f"{path}: the checkpoint cannot be read ({_first_line(exc)}); "
+                              "it was kept: delete it to start afresh") from None
+    return {**meta["scalars"], **arrays}, meta, digest
+
+
+def _first_line(exc) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0][:200]

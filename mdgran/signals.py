@@ -1,0 +1,91 @@
+"""Signals: SIGINT (Ctrl-C) and SIGTERM (what batch schedulers send at the time limit).
+
+Both end a run the same way: :class:`Interrupted` (a :class:`KeyboardInterrupt`) is raised in
+the driver, which closes every reporter as ``"interrupted"`` (the H5MD writer keeps a valid
+checkpoint if checkpointing is on, else removes its temporary) and re-raises; the command
+line then says how to resume and exits with ``128 + signal number`` (130, 143).
+
+* :func:`terminate_as_interrupt` makes SIGTERM raise :class:`Interrupted` like Ctrl-C does
+  (the command line installs it; a library caller keeps its own handlers); :func:`interrupting`
+  does the same inside a block (a sweep's main process), where the handlers are still Python's
+  defaults.
+* :func:`deferred` holds both signals while C code that calls back into Python runs (LAMMPS's
+  ``fix external`` callback): an exception raised inside a ctypes callback cannot cross the C
+  frames and is dropped ("Exception ignored on calling ctypes callback"), so the run would go
+  on as if nothing happened.  The held signal is delivered when the C call returns.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+
+HELD = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by a signal; ``signum`` says which (exit status ``128 + signum``)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def terminate_as_interrupt():
+    """SIGINT and SIGTERM raise :class:`Interrupted` from now on (main thread only)."""
+    if _main_thread():
+        for s in HELD:
+            signal.signal(s, _raise_interrupted)
+
+
+@contextmanager
+def interrupting():
+    """Inside the block, SIGINT and SIGTERM raise :class:`Interrupted` where they are still
+    Python's defaults (main thread only); the handlers in place before are restored after."""
+    saved = {}
+    if _main_thread():
+        for s in HELD:
+            if signal.getsignal(s) in (signal.SIG_DFL, signal.default_int_handler):
+                saved[s] = signal.signal(s, _raise_interrupted)
+    try:
+        yield
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+
+def _deliver(signum: int, handler):
+    """Act on a held signal as ``handler`` (the one in place before holding) would have."""
+    if handler is signal.SIG_IGN:
+        return
+    if callable(handler) and handler is not signal.default_int_handler:
+        handler(signum, None)  # a handler of the caller's (ours raises Interrupted)
+    raise Interrupted(signum)  # Python's default for SIGINT raises; SIGTERM's would kill
+
+
+@contextmanager
+def deferred():
+    """Hold SIGINT and SIGTERM inside the block; the first one that arrived is delivered
+    (raised as :class:`Interrupted`, or passed to the caller's handler) when it ends."""
+    if not _main_thread():
+        yield
+        return
+    got = []
+    before = {s: signal.getsignal(s) for s in HELD}
+    for s in HELD:
+        signal.signal(s, lambda signum, frame: got.append(signum))
+    try:
+        yield
+    finally:
+        for s, h in before.items():
+            signal.signal(s, h)
+    if got:
+        _deliver(got[0], before[got[0]])

