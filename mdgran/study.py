@@ -53,9 +53,61 @@ def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None
     return read_h5(path), scene
 
 
-def sweep_cases(sweep_dir: Path) -> list:
+def _case_record(sweep_dir: Path, index: int):
+    """A case's JSON record, or None if it has none (or an unreadable one)."""
+    try:
+        rec = json.loads((sweep_dir / "cases" / f"{index:04d}.json").read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return rec if isinstance(rec, dict) else None
+
+
+def _listed(indices: list) -> str:
+    shown = ", ".join(f"{i:04d}" for i in indices[:5])
+    return shown + (f" and {len(indices) - 5} more" if len(indices) > 5 else "")
+
+
+def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
+    """Refuse (:class:`~mdgran.scene.SceneError`, one line, exit status 2) a sweep folder that
+    is unfinished (a case without its JSON) or whose finished cases lack their ``.h5`` (an
+    older mdgran's MPI sweep wrote only the JSON on its worker ranks): their figures and tests
+    would silently leave those cases out.  Returns the cases that failed without writing an
+    ``.h5`` (an exception, a worker that died), which the report names in its run status."""
+    from .scene import SceneError
+
+    spec = json.loads((sweep_dir / "sweep.json").read_text())
+    unrun, no_h5, failed = [], [], []
+    for c in spec["cases"]:
+        if (sweep_dir / "cases" / f"{c['index']:04d}.h5").exists():
+            continue
+        rec = _case_record(sweep_dir, c["index"])
+        if rec is None:
+            unrun.append(c["index"])
+        elif str(rec.get("status", "")).startswith("failed"):
+            failed.append({"index": c["index"], "params": c["params"],
+                           "status": f"{rec['status']} (no .h5 written)"})
+        else:
+            no_h5.append(c["index"])
+    total = len(spec["cases"])
+    again = ("; run the same mdgran sweep command on that folder again to "
+             + ("finish it" if unrun else "redo them"))
+    if unrun:
+        raise SceneError(key, f"{sweep_dir}: the sweep is unfinished, {len(unrun)} of {total} "
+                         f"cases have not run (no cases/NNNN.json: {_listed(unrun)})" + again)
+    if no_h5:
+        raise SceneError(key, f"{sweep_dir}: {len(no_h5)} of {total} finished cases have no "
+                         f"cases/NNNN.h5 ({_listed(no_h5)}; their .json says they ran: an "
+                         "older mdgran's MPI sweep wrote none on its worker ranks), so "
+                         "Figs. 6, 7, B1-B3 and the pooled test would leave them out" + again)
+    return failed
+
+
+def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     """Every finished case of a sweep folder: params, scene, a lazy trajectory loader, and the
-    run summary recomputed with the current analysis code."""
+    run summary recomputed with the current analysis code.  A folder with cases missing their
+    files is refused (:func:`check_sweep_files`); a case that failed without an ``.h5`` is left
+    out here (the report names it in its run status)."""
+    check_sweep_files(sweep_dir, key)
     spec = json.loads((sweep_dir / "sweep.json").read_text())
     cases = []
     for c in spec["cases"]:
@@ -136,6 +188,8 @@ def make_report(out, small: bool = False, workers: int | None = None,
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if progress else (lambda m: None)
+    if sweep_dir is not None:  # a sweep with cases missing their files is refused up front
+        check_sweep_files(Path(sweep_dir), "--sweep-dir")
     runs = {name: ensure_run(name, out / "runs", backend, progress, duration)
             for name in FLAGSHIP}
     (micro, micro_sc), (macro, macro_sc) = runs["micro-star"], runs["macro-hertz"]
@@ -144,7 +198,12 @@ def make_report(out, small: bool = False, workers: int | None = None,
         run_sweep(sweep, sdir, workers=workers or (os.cpu_count() or 1), small=small,
                   progress=progress, backend=_folder_backend(sdir, backend))
     say("analysing the sweep cases")
-    cases = sweep_cases(sdir)
+    key = "--sweep-dir" if sweep_dir is not None else "DIR"
+    failed = check_sweep_files(sdir, key)
+    cases = sweep_cases(sdir, key)
+    if failed:
+        say(f"{len(failed)} sweep cases failed without output and are left out of the sweep's "
+            "figures (named in report.md's run status)")
     say("drawing figures")
     numbers = {
         "fig2": pf.fig2(micro, micro_sc, macro, macro_sc, figs / "fig2.png"),
@@ -153,6 +212,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
         "fig5": pf.fig5(micro, micro_sc, figs / "fig5.png"),
     }
     numbers["status"] = run_status({"micro-star": micro, "macro-hertz": macro}, cases)
+    numbers["status"]["sweep_not_complete"] += failed
     numbers["decay"] = kinetic_decay(micro, micro_sc, macro, macro_sc)
     numbers["coincidence_windows"] = coincidence_windows(micro, micro_sc)
     numbers["smoothing"] = smoothing_sensitivity(micro, micro_sc)
@@ -176,7 +236,8 @@ def make_report(out, small: bool = False, workers: int | None = None,
         bdir = out / "beyond" / name
         run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
                   progress=progress, backend=_folder_backend(bdir, backend))
-        bc = sweep_cases(bdir)
+        bfailed = check_sweep_files(bdir, "DIR")
+        bc = sweep_cases(bdir, "DIR")
         key, label, log = BEYOND[name]
         late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
                  "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in bc]
@@ -186,7 +247,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
                             color_key=key, color_label=label, title=name, log_color=log),
             "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
             "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
-            "not_complete": not_complete(bc),
+            "not_complete": not_complete(bc) + bfailed,
             "backend": _folder_backend(bdir, backend)}
     _atomic_write(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
     _atomic_write(out / "report.md", markdown(numbers, cases, small))

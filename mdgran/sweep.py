@@ -19,14 +19,37 @@ A sweep file (TOML; built-in ones in ``mdgran/sweeps/``)::
     "run.duration" = 50.0
 
 Every case writes ``DIR/cases/NNNN.h5`` (the run, atomically) and then ``DIR/cases/NNNN.json``
-(its summary, atomically).  A case counts as done when its JSON exists, so a sweep that is
-killed and started again redoes only the unfinished cases.  ``DIR/sweep.json`` lists the
-cases and their parameters; ``DIR/summary.json`` (rewritten at the end of every call) counts
-the complete cases and lists the others: those whose ledger error exceeded their backend's
-declared bound (status ``ledger-exceeded: ...``) and those that failed.  Cases run in
-separate processes (``--workers``); the same spec runs on a cluster through mpi4py's
-``MPIPoolExecutor`` (``--executor mpi``, launched as
-``mpiexec -n 17 python -m mpi4py.futures -m mdgran sweep ... --executor mpi``).
+(its summary, atomically).  A case counts as done when its JSON exists (and its H5, unless it
+failed), so a sweep that is killed or interrupted and started again redoes only the unfinished
+cases.  ``DIR/sweep.json`` lists the cases and their parameters; ``DIR/summary.json``
+(rewritten at the end of every call) counts the complete cases and lists the others: those
+whose ledger error exceeded their backend's declared bound (status ``ledger-exceeded: ...``)
+and those that failed.
+
+**Faults.**  Cases run in separate worker processes (``--workers``).  A case that fails for
+any reason is recorded as failed, with a one-line reason (``failed: RuntimeError: ...``), in
+its JSON and in ``summary.json``, and the sweep goes on: an exception of any kind in the case
+(returned by the worker as a line of text: not every exception pickles), or its worker process
+dying (killed, out of memory, a crash in compiled code): the worker is replaced and the case
+runs again, and a case that killed its worker :data:`WORKER_DEATHS` (2) times is recorded
+failed.  A failed case is not redone when the sweep is run again; delete its JSON to retry it.
+Ctrl-C or SIGTERM on the main process stops the sweep at once: queued cases are not started,
+the workers are killed (what they were writing is removed), finished cases stay, the command
+exits with the interrupted status (130; 143 for SIGTERM) and the same command resumes.  Workers
+exit by themselves when the main process dies, even by SIGKILL (Linux's parent-death signal,
+and a thread polling the parent's pid).
+
+**MPI.**  The same spec runs on MPI ranks through mpi4py's ``MPIPoolExecutor``
+(``--executor mpi``; ``pip install 'mdgran[mpi]'``), rank 0 running the sweep and the other
+ranks its cases::
+
+    mpiexec -n 17 python -m mpi4py.futures "$(command -v mdgran)" sweep SWEEP --out DIR \\
+        --executor mpi
+
+(Without mpiexec, ``--executor mpi`` spawns ``--workers`` MPI processes itself.)  Each case is a
+run of its own on its rank (``collective=False``: it writes its H5 whatever the rank), and a
+LAMMPS case runs on ``MPI.COMM_SELF`` (on ``MPI_COMM_WORLD``, shared by the pool's ranks, it
+would deadlock).  Plain ``mpiexec -n K mdgran sweep`` is refused on ranks other than 0.
 """
 from __future__ import annotations
 
@@ -35,10 +58,10 @@ import json
 import os
 import sys
 import time as _time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .scene import SceneError, load_scene, read_toml
+from .signals import interrupting
 
 SWEEP_DIR = Path(__file__).parent / "sweeps"
 
@@ -125,17 +148,231 @@ def case_summary(scene, result) -> dict:
     return out
 
 
-def run_case(scene_spec: str, backend: str, case: dict, out_dir: str) -> dict:
-    """Run one case (in a worker process); returns its summary."""
+def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
+             comm_self: bool = False) -> dict:
+    """Run one case (in a worker process); returns its summary.  The run is a run of its own
+    (``collective=False``): on an MPI worker rank it writes its ``.h5`` whatever the rank.
+    ``comm_self``: the case runs on an MPI worker rank, so a backend that takes a communicator
+    (LAMMPS) gets ``MPI.COMM_SELF``, not ``MPI_COMM_WORLD`` (which the pool's ranks share: a
+    LAMMPS instance on it would wait for every rank and deadlock)."""
     from .simulation import run
 
     cases = Path(out_dir) / "cases"
     stem = f"{case['index']:04d}"
     scene = load_scene(scene_spec, [tuple(o) for o in case["overrides"]])
-    res = run(scene, backend, out=cases / f"{stem}.h5", raise_errors=False)
+    options = {}
+    if comm_self:
+        from .backends import get_backend
+
+        if "comm" in getattr(get_backend(backend), "accepted_options", ()):
+            from mpi4py import MPI
+
+            options["comm"] = MPI.COMM_SELF
+    res = run(scene, backend, out=cases / f"{stem}.h5", raise_errors=False, collective=False,
+              **options)
     summary = {"index": case["index"], "params": case["params"], **case_summary(scene, res)}
     _atomic_json(cases / f"{stem}.json", summary)
     return summary
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """``Type: message`` of an exception on one line, at most ``limit`` characters."""
+    text = f"{type(exc).__name__}: {' '.join(str(exc).split()) or '(no message)'}"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _call_case(fn, args):
+    """Run a case in a worker and never raise: ``("ok", summary)`` or ``("error", reason)``
+    (an exception object may not pickle back: SceneError's does not)."""
+    try:
+        return "ok", fn(*args)
+    except KeyboardInterrupt:  # Ctrl-C reaching an MPI rank: the sweep stops, the case is not
+        raise                  # failed (it runs again on the next call)
+    except BaseException as exc:  # noqa: BLE001 - any failure is the case's, not the sweep's
+        return "error", one_line(exc)
+
+
+def _failed_case(case: dict, out: Path, reason: str) -> dict:
+    """Record a case that failed without a summary of its own (an exception, a dead worker)."""
+    summary = {"index": case["index"], "params": case["params"], "status": f"failed: {reason}",
+               "error": reason}
+    _atomic_json(out / "cases" / f"{case['index']:04d}.json", summary)
+    return summary
+
+
+# ---- worker processes ---------------------------------------------------------------------
+def _die_with_parent(parent_pid: int):
+    """Make this worker exit when the sweep's main process dies, however it dies (SIGKILL
+    included): the kernel's parent-death signal on Linux, and a thread that polls the parent's
+    pid everywhere (it also covers a parent that died before the signal was armed)."""
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+    def watch():
+        while True:
+            _time.sleep(0.5)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="mdgran-parent-watch", daemon=True).start()
+
+
+def _worker_main(conn, parent_pid: int, fn):
+    """A worker process: run the cases the main process sends until it sends None."""
+    import signal
+
+    _die_with_parent(parent_pid)
+    # Ctrl-C in a terminal reaches the whole process group: the main process decides what
+    # happens (it stops the workers), a worker does not die of it mid-file on its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    while True:
+        try:
+            args = conn.recv()
+        except (EOFError, OSError):
+            return
+        if args is None:
+            return
+        conn.send(_call_case(fn, args))
+
+
+class _Worker:
+    def __init__(self, ctx, fn):
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child, os.getpid(), fn),
+                                name="mdgran-sweep-worker", daemon=True)
+        self.proc.start()
+        child.close()
+        self.case = None
+
+    def stop(self, kill: bool):
+        if kill:
+            self.proc.kill()
+        else:
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+        self.proc.join(timeout=None if kill else 10)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def _death(exitcode) -> str:
+    import signal
+
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"killed by signal {-exitcode} ({signal.Signals(-exitcode).name})"
+        except ValueError:
+            return f"killed by signal {-exitcode}"
+    return f"exited with status {exitcode}"
+
+
+#: a case whose worker process died this many times is recorded as failed
+WORKER_DEATHS = 2
+
+
+def _run_processes(todo, args_of, fn, workers: int, out: Path, done):
+    """Run ``todo`` on ``workers`` processes; ``done(case, summary)`` for each finished one.
+    A case raising anything is recorded failed (reason on one line); a worker that dies is
+    replaced and its case run again, and recorded failed when it killed its worker
+    :data:`WORKER_DEATHS` times.  Any exception here (Ctrl-C, SIGTERM) kills the workers at
+    once and propagates: finished cases stay, the others run on the next call."""
+    import collections
+    import multiprocessing
+    from multiprocessing.connection import wait
+
+    ctx = multiprocessing.get_context()
+    queue = collections.deque(todo)
+    deaths: dict = {}
+    pool: list = []
+    try:
+        for _ in range(min(workers, len(todo))):
+            pool.append(_Worker(ctx, fn))
+        while queue or any(w.case is not None for w in pool):
+            for i, w in enumerate(pool):
+                if w.case is not None or not queue:
+                    continue
+                if not w.proc.is_alive():  # died idle (killed from outside): replace it
+                    w.stop(kill=True)
+                    pool[i] = w = _Worker(ctx, fn)
+                try:
+                    w.conn.send(args_of(queue[0]))
+                except OSError:  # died just now: the next round replaces it
+                    continue
+                w.case = queue.popleft()
+            busy = [w for w in pool if w.case is not None]
+            if not busy:  # every idle worker died before taking a case: replace them
+                _time.sleep(0.05)
+                continue
+            ready = wait([w.conn for w in busy] + [w.proc.sentinel for w in busy])
+            for i, w in enumerate(pool):
+                if w.case is None or (w.conn not in ready and w.proc.sentinel not in ready):
+                    continue
+                case, msg = w.case, None
+                try:
+                    if w.conn.poll():
+                        msg = w.conn.recv()
+                except (EOFError, OSError):
+                    msg = None
+                if msg is not None:
+                    w.case = None
+                    kind, value = msg
+                    done(case, value if kind == "ok" else _failed_case(case, out, value))
+                    continue
+                # the worker died running the case: replace it, run the case again (first)
+                w.proc.join()
+                why = _death(w.proc.exitcode)
+                w.conn.close()
+                for stale in (out / "cases").glob(f"*.tmp-{w.proc.pid}"):
+                    stale.unlink(missing_ok=True)
+                pool[i] = _Worker(ctx, fn)
+                deaths[case["index"]] = deaths.get(case["index"], 0) + 1
+                if deaths[case["index"]] >= WORKER_DEATHS:
+                    done(case, _failed_case(case, out, f"its worker process died "
+                                            f"{WORKER_DEATHS} times running it (last: {why})"))
+                else:
+                    queue.appendleft(case)
+    except BaseException:
+        for w in pool:
+            w.stop(kill=True)
+        raise
+    for w in pool:
+        w.stop(kill=False)
+
+
+def _run_futures(pool, todo, args_of, fn, out: Path, done):
+    """The same over a ``concurrent.futures`` executor (mpi4py's ``MPIPoolExecutor``): a case
+    raising anything is recorded failed; an interrupt cancels the queued cases."""
+    from concurrent.futures import as_completed
+
+    try:
+        futs = {pool.submit(_call_case, fn, args_of(c)): c for c in todo}
+        for fut in as_completed(futs):
+            case = futs[fut]
+            try:
+                kind, value = fut.result()
+            except Exception as exc:  # noqa: BLE001 - the executor's own failure
+                kind, value = "error", f"the executor failed on it: {one_line(exc)}"
+            done(case, value if kind == "ok" else _failed_case(case, out, value))
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def sweep_summary(results: list) -> dict:
@@ -153,31 +390,59 @@ def sweep_summary(results: list) -> dict:
             "failed": [brief(r) for r in bad if not r["status"].startswith(LEDGER_EXCEEDED)]}
 
 
+def _finished(out_dir: Path, index: int) -> bool:
+    """A case is finished when its JSON exists and, unless it failed, its H5 too (a case whose
+    JSON says it ran but whose H5 is missing, as an older mdgran's MPI sweep left on its
+    worker ranks, is run again)."""
+    js = out_dir / "cases" / f"{index:04d}.json"
+    if not js.exists():
+        return False
+    if (out_dir / "cases" / f"{index:04d}.h5").exists():
+        return True
+    try:
+        return str(json.loads(js.read_text()).get("status", "")).startswith("failed")
+    except (ValueError, UnicodeDecodeError, AttributeError):
+        return False
+
+
 def pending_cases(sweep: dict, out_dir: Path) -> list:
-    return [c for c in sweep["cases"]
-            if not (out_dir / "cases" / f"{c['index']:04d}.json").exists()]
+    return [c for c in sweep["cases"] if not _finished(Path(out_dir), c["index"])]
 
 
-def _executor(kind: str, workers: int):
-    if kind == "process":
-        return ProcessPoolExecutor(max_workers=workers)
-    if kind == "mpi":
-        try:
-            from mpi4py.futures import MPIPoolExecutor
-        except ImportError:
-            raise SceneError("--executor", "'mpi' needs mpi4py (pip install mpi4py)") from None
-        return MPIPoolExecutor()
-    raise SceneError("--executor", f"must be 'process' or 'mpi', not {kind!r}")
+def _mpi_executor(workers: int):
+    try:
+        from mpi4py.futures import MPIPoolExecutor
+    except ImportError:
+        raise SceneError("--executor", "'mpi' needs mpi4py: pip install 'mdgran[mpi]'") \
+            from None
+    # under python -m mpi4py.futures the pool is the other ranks (max_workers is not used);
+    # otherwise mpi4py spawns ``workers`` processes
+    return MPIPoolExecutor(max_workers=workers)
 
 
 def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
               overrides=(), progress=True, stream=None, small: bool = False,
-              backend: str | None = None) -> list:
+              backend: str | None = None, case_fn=None) -> list:
     """Run every unfinished case of ``spec``; returns all case summaries (finished ones read
     back from disk), sorted by case index.  ``backend`` replaces the spec's backend; a folder
-    holds one sweep on one backend, so resuming it on another is refused."""
+    holds one sweep on one backend, so resuming it on another is refused.
+
+    A case that fails for any reason (an exception, its worker process dying twice) is
+    recorded as failed, with a one-line reason, in its JSON and in ``summary.json``, and the
+    sweep goes on.  Ctrl-C or SIGTERM stops the workers at once and raises
+    :class:`KeyboardInterrupt` (:class:`mdgran.signals.Interrupted` for a signal): the finished cases
+    stay, and the same call runs the rest.  ``case_fn`` replaces :func:`run_case` (same
+    arguments; a module-level function, for tests)."""
     from .backends import BACKENDS
 
+    if executor not in ("process", "mpi"):
+        raise SceneError("--executor", f"must be 'process' or 'mpi', not {executor!r}")
+    from .simulation import mpi_rank
+
+    if mpi_rank() != 0:  # plain mpiexec -n K mdgran sweep: every rank would run every case
+        raise SceneError("--executor", f"this is MPI rank {mpi_rank()}: run a sweep on MPI "
+                         "ranks as mpiexec -n K python -m mpi4py.futures "
+                         '"$(command -v mdgran)" sweep ... --executor mpi')
     stream = stream or sys.stderr
     sweep = load_sweep(spec, overrides, small)
     if backend is not None:
@@ -198,6 +463,7 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                 json.dumps(sweep["cases"])):
             raise SceneError("--out", f"{out} holds another sweep (or the same on backend "
                              f"{before.get('backend')!r}); use a new folder")
+    pool = _mpi_executor(workers) if executor == "mpi" and pending_cases(sweep, out) else None
     (out / "cases").mkdir(parents=True, exist_ok=True)
     for stale in (out / "cases").glob("*.tmp-*"):  # left by a killed sweep (one sweep per DIR)
         stale.unlink()
@@ -207,19 +473,41 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     start = _time.perf_counter()
     if progress and done0:
         print(f"{sweep['name']}: {done0} of {total} cases already done, resuming", file=stream)
+    fn = case_fn or run_case
+    mpi = executor == "mpi"
+
+    def args_of(c):
+        return (sweep["scene"], sweep["backend"], c, str(out)) + ((True,) if mpi else ())
+
+    count = [0]
+
+    def done(case, summary):
+        count[0] += 1
+        if not progress:
+            return
+        k = count[0]
+        el = _time.perf_counter() - start
+        left = el / k * (len(todo) - k)
+        frac = (done0 + k) / total
+        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+        st = str(summary.get("status", ""))
+        note = f"  case {case['index']:04d} {st}" if st.startswith("failed") else ""
+        print(f"{sweep['name']} [{bar}] {done0 + k}/{total} cases  elapsed {el:.0f}s  "
+              f"left ~{left:.0f}s{note}", file=stream, flush=True)
+
     if todo:
-        with _executor(executor, workers) as pool:
-            futs = [pool.submit(run_case, sweep["scene"], sweep["backend"], c, str(out))
-                    for c in todo]
-            for k, fut in enumerate(as_completed(futs), start=1):
-                fut.result()
-                if progress:
-                    el = _time.perf_counter() - start
-                    left = el / k * (len(todo) - k)
-                    frac = (done0 + k) / total
-                    bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-                    print(f"{sweep['name']} [{bar}] {done0 + k}/{total} cases  "
-                          f"elapsed {el:.0f}s  left ~{left:.0f}s", file=stream, flush=True)
+        try:
+            with interrupting():
+                if mpi:
+                    _run_futures(pool, todo, args_of, fn, out, done)
+                else:
+                    _run_processes(todo, args_of, fn, workers, out, done)
+        finally:
+            if not mpi:  # the workers are stopped: what they were writing goes
+                for stale in (out / "cases").glob("*.tmp-*"):
+                    stale.unlink(missing_ok=True)
+    elif pool is not None:
+        pool.shutdown()
     results = [json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
                for c in sweep["cases"]]
     _atomic_json(out / "summary.json", sweep_summary(results))
