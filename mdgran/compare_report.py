@@ -16,11 +16,39 @@ def _atomic_write(path: Path, text: str):
     os.replace(tmp, path)
 
 
+def _adhesive(scene) -> bool:
+    """Does the scene's contact law stick (Schwarz, JKR, DMT: snap-off and snap-to events) or
+    not (Hertz: contacts only separate and touch)?"""
+    from .contact import law_from_contact_table
+
+    contact = scene.data.get("contact", {})
+    try:
+        return law_from_contact_table(contact).kind != "hertz"
+    except (ValueError, TypeError):
+        return contact.get("law", "schwarz") != "hertz"
+
+
+def event_labels(scene) -> tuple:
+    """Legend labels of (open, close) events: snap-off/snap-to only where the law adheres."""
+    if _adhesive(scene):
+        return "open (snap-off)", "close (snap-to)"
+    return "open (separate)", "close (touch)"
+
+
+#: Line style of each backend in the figures where their curves overlap (the first, the
+#: reference, is drawn wide and pale underneath, the others narrower, dashed, on top).
+BACKEND_STYLES = [dict(ls="-", lw=2.6, alpha=0.55), dict(ls="--", lw=1.2, alpha=1.0),
+                  dict(ls=":", lw=1.4, alpha=1.0), dict(ls="-.", lw=1.2, alpha=1.0)]
+#: The predictability horizon: black, dash-dot, never a backend's colour.
+HORIZON_STYLE = dict(color="k", ls="-.", lw=1.0)
+
+
 def _figures(out: Path, scene, runs, pred, report, pairs):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     scale = scene.impulse_energy or 1.0
     styles = ["-", "--", ":", "-."]
@@ -64,10 +92,14 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
         ax.semilogy(tt, np.maximum(d, 1e-18), color=f"C{i}", lw=1.5,
                     label=f"{r.name} - {ref.name}")
         ax.semilogy(tt, SAFETY * (r.error[: len(d)] + ref.error[: len(d)]), ":",
-                    color=f"C{i}", label=f"allowed: {SAFETY:g} x (own errors)")
-        ax.axvline(report["pairs"][r.name]["horizon"], color=f"C{i}", ls="--", lw=0.8)
+                    color=f"C{i}", label=f"allowed for {r.name}: {SAFETY:g} x (own errors)")
+        # black for every pair (never a backend's colour); with several pairs, one style each
+        hstyle = {**HORIZON_STYLE, "ls": ["-.", (0, (6, 2)), (0, (1, 1)), "-"][(i - 1) % 4]}
+        ax.axvline(report["pairs"][r.name]["horizon"], **hstyle,
+                   label=f"predictability horizon, {r.name} vs {ref.name} "
+                         f"(t = {report['pairs'][r.name]['horizon']:.4g})")
     ax.set(xlabel="time (1/q)", ylabel="max_i |x_i - x_i'| (units of p)",
-           title="difference between backends (dashed line: predictability horizon)")
+           title="difference between backends (black vertical line: predictability horizon)")
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "difference.png", dpi=110)
@@ -75,17 +107,20 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     # event timelines
     fig, axs = plt.subplots(1, len(runs), figsize=(4 * len(runs) + 1, 4.5), sharey=True,
                             squeeze=False)
+    open_label, close_label = event_labels(scene)
     for ax, r in zip(axs[0], runs):
         tr = r.nominal
-        for kind, mk, col, lab in ((0, "v", "C3", "open (snap-off)"),
-                                   (1, "^", "C2", "close (snap-to)")):
+        for kind, mk, col, lab in ((0, "v", "C3", open_label), (1, "^", "C2", close_label)):
             sel = tr.ev_kind == kind
             ax.plot(tr.ev_time[sel], tr.ev_contact[sel], mk, color=col, ms=4, label=lab)
         ax.set(xlabel="time (1/q)", title=f"{r.name}: {len(tr.ev_time)} contact events")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # contacts are numbered
         ax.grid(alpha=0.3)
     axs[0][0].set_ylabel("contact (i joins bead i-1 and i)")
-    axs[0][0].legend(fontsize=7)
-    fig.tight_layout()
+    # above the panels: inside, it hid the events of a busy run (macro-hertz has ~1700)
+    fig.legend(*axs[0][0].get_legend_handles_labels(), loc="upper center", ncol=2, fontsize=8,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
     fig.savefig(out / "events.png", dpi=110)
     plt.close(fig)
     _cluster_figures(out, scene, runs, report, pairs, plt)
@@ -94,33 +129,43 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
 def _cluster_figures(out, scene, runs, report, pairs, plt):
     """clusters.png: clusters over time, cumulative new clusters, lifetime distributions;
     c_eff.png: the effective damping of each backend on the same axes."""
+    from matplotlib.ticker import MaxNLocator
+
     from .analysis import effective_damping, trajectory_history
 
     horizon = min(info["horizon"] for info in report["pairs"].values()) if report["pairs"] \
         else None
+    style = {r.name: {"color": f"C{i}", **BACKEND_STYLES[i % len(BACKEND_STYLES)]}
+             for i, r in enumerate(runs)}
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.2))
-    for i, r in enumerate(runs):
+    for r in runs:
         tr = r.nominal
         h = trajectory_history(tr, scene)
-        a1.plot(tr.time, h.count_at(tr.time), color=f"C{i}", lw=1.0, label=r.name)
-        a2.plot(tr.time, h.cumulative_at(tr.time), color=f"C{i}", lw=1.2, label=r.name)
+        # step functions of time: drawn as steps, the reference wide and pale underneath, the
+        # others dashed on top, so that where they coincide both stay visible
+        a1.plot(tr.time, h.count_at(tr.time), drawstyle="steps-post", label=r.name,
+                **style[r.name])
+        a2.plot(tr.time, h.cumulative_at(tr.time), drawstyle="steps-post", label=r.name,
+                **style[r.name])
     for name, info in pairs.items():
         lives = info["clusters"]["lives"]
         for i, (who, lv) in enumerate(lives.items()):
             if len(lv):
                 x = np.sort(lv.lifetime)
-                a3.step(x, np.arange(1, len(x) + 1) / len(x), where="post", color=f"C{i}",
-                        label=f"{who}: {len(x)} clusters")
+                st = style.get(who, {"color": f"C{i}", **BACKEND_STYLES[i % 4]})
+                a3.step(x, np.arange(1, len(x) + 1) / len(x), where="post",
+                        label=f"{who}: {len(x)} clusters", **st)
         lt = report["pairs"][name]["clusters"]["lifetimes"]
         if lt["pvalue"] is not None:
             a3.set_title(f"cluster lifetimes {info['clusters']['where']}\n"
                          f"(ensembles; KS p = {lt['pvalue']:.2g})", fontsize=9)
     for ax in (a1, a2):
         if horizon is not None:
-            ax.axvline(horizon, color="k", ls="--", lw=0.8)
+            ax.axvline(horizon, label="predictability horizon", **HORIZON_STYLE)
         ax.set_xlabel("time (1/q)")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts
         ax.legend(fontsize=7)
-    a1.set(ylabel="clusters", title="number of clusters (dashed: horizon)")
+    a1.set(ylabel="clusters", title="number of clusters (dash-dot: horizon)")
     a2.set(ylabel="newly formed clusters, cumulative", title="cumulative new clusters")
     a3.set(xscale="log", xlabel="cluster lifetime (1/q)", ylabel="cumulative fraction")
     if a3.get_legend_handles_labels()[0]:
@@ -129,13 +174,13 @@ def _cluster_figures(out, scene, runs, report, pairs, plt):
     fig.savefig(out / "clusters.png", dpi=110)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(8, 4))
-    for i, r in enumerate(runs):
-        ax.plot(r.nominal.time, effective_damping(r.nominal, scene), color=f"C{i}",
-                lw=1.2, label=r.name)
+    for r in runs:
+        ax.plot(r.nominal.time, effective_damping(r.nominal, scene), label=r.name,
+                **style[r.name])
     if horizon is not None:
-        ax.axvline(horizon, color="k", ls="--", lw=0.8)
+        ax.axvline(horizon, label="predictability horizon", **HORIZON_STYLE)
     ax.set(xlabel="time (1/q)", ylabel="C_eff / C_+",
-           title="effective damping, Eq. 9 (dashed: horizon)")
+           title="effective damping, Eq. 9 (dash-dot: horizon)")
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "c_eff.png", dpi=110)

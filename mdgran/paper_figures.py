@@ -15,6 +15,8 @@ from . import analysis as an
 from .analysis.statistics import cluster_lives
 
 DPI = 120
+#: Font size (points) of tick labels in the dense grid figures (B1-B3): 8 pt is 13 px at DPI.
+TICK_PT = 8
 
 
 def _plt():
@@ -215,11 +217,13 @@ def fig5(traj, scene, path) -> dict:
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
     a1.step(t, rc.history.cumulative_at(traj.time), where="post", color="0.5", lw=1,
             label="cumulative new clusters N(t)")
-    a1.plot(t, rc.cumulative_smooth, color="C0", lw=1.6, label="smoothed (Appendix A)")
+    a1.plot(t, rc.cumulative_smooth, color="C0", lw=1.6,
+            label="smoothed (Appendix A knots, monotone; non-decreasing)")
     a1.set(ylabel="clusters formed")
     a1.legend(fontsize=8)
     a2.plot(t, rc.rate, color="C0", lw=1.5, label="re-clustering rate dN/dt (per time unit)")
-    a2.set_ylabel("re-clustering rate", color="C0")
+    a2.set_ylabel("re-clustering rate dN/dt\n(new clusters per time unit 1/q)", color="C0")
+    a2.set_ylim(bottom=0.0)  # a rate of cluster formation; the smoothing keeps it >= 0
     for p in co["rate_peaks"]:
         a2.axvline(p / tc, color="C0", ls=":", lw=1)
     a3 = a2.twinx()
@@ -239,11 +243,52 @@ def fig5(traj, scene, path) -> dict:
 
 
 # ---- Fig. 6 and B1-B3: the sweep grid ----------------------------------------------------------
-def _grid_axes(plt, k1s, v0s, size=(1.5, 1.1), sharey=True):
-    fig, axs = plt.subplots(len(v0s), len(k1s), figsize=(size[0] * len(k1s) + 1.2,
-                                                         size[1] * len(v0s) + 1.0),
-                            sharex=False, sharey=sharey, squeeze=False)
+#: Margins of the grid figures in inches: left, right (colour bar and its label), bottom, top
+#: (a three-line title and the column titles).  Fixed margins instead of a layout engine:
+#: constrained layout took ~20 s per figure on the 13 x 7 grid.
+_GRID_MARGINS = (0.95, 1.45, 0.6, 1.05)
+
+
+def _grid_axes(plt, k1s, v0s, size=(2.0, 1.3), sharey=True):
+    """One panel per case (rows: v0, columns: K1), x shared by every panel of the figure, and
+    room on the right for a colour bar (:func:`_grid_colorbar`)."""
+    left, right, bottom, top = _GRID_MARGINS
+    width = max(size[0] * len(k1s), 5.0) + left + right
+    height = size[1] * len(v0s) + bottom + top
+    fig, axs = plt.subplots(len(v0s), len(k1s), figsize=(width, height), sharex=True,
+                            sharey=sharey, squeeze=False)
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height,
+                        top=1 - top / height, wspace=0.08, hspace=0.12)
     return fig, axs
+
+
+def _grid_colorbar(fig, mappable, label, extend="neither"):
+    """A colour bar right of the grid, 60 % of its height, ticks and label of readable size."""
+    left, right, bottom, top = _GRID_MARGINS
+    w, h = fig.get_size_inches()
+    grid_h = h - bottom - top
+    cax = fig.add_axes([1 - (right - 0.15) / w, (bottom + 0.2 * grid_h) / h, 0.14 / w,
+                        0.6 * grid_h / h], label="<colorbar>")  # matplotlib's own name
+    cb = fig.colorbar(mappable, cax=cax, label=label, extend=extend)
+    cb.ax.tick_params(labelsize=TICK_PT)
+    cb.ax.yaxis.label.set_size(TICK_PT + 1)
+    return cb
+
+
+def _colored_line(ax, x, y, c, norm, cmap, lw=1.0, max_points=1200):
+    """``y(x)`` drawn as a line coloured by ``c`` (a LineCollection); at most ``max_points``
+    vertices (every k-th frame of a smooth curve)."""
+    from matplotlib.collections import LineCollection
+
+    step = max(1, int(math.ceil(len(x) / max_points)))
+    idx = np.unique(np.concatenate((np.arange(0, len(x), step), [len(x) - 1])))
+    pts = np.column_stack((np.asarray(x, float)[idx], np.asarray(y, float)[idx]))
+    lc = LineCollection(np.stack((pts[:-1], pts[1:]), axis=1), cmap=cmap, norm=norm,
+                        linewidths=lw)
+    cc = np.asarray(c, float)[idx]
+    lc.set_array(0.5 * (cc[:-1] + cc[1:]))
+    ax.add_collection(lc)
+    return lc
 
 
 def fig6(cases, path, pick=None) -> dict:
@@ -255,59 +300,100 @@ def fig6(cases, path, pick=None) -> dict:
     pick = pick or [(k1s[0], v0s[len(v0s) // 3]), (k1s[0], v0s[2 * len(v0s) // 3]),
                     (k1s[-1], v0s[len(v0s) // 3]), (k1s[-1], v0s[2 * len(v0s) // 3])]
     chosen = [next(c for c in cases if c["k1"] == k and c["v0"] == v) for k, v in pick]
-    fig, axs = plt.subplots(2, len(chosen), figsize=(3.4 * len(chosen), 6.4), squeeze=False)
+    fig, axs = plt.subplots(2, len(chosen), figsize=(3.4 * len(chosen) + 0.8, 6.4),
+                            squeeze=False, layout="constrained")
     for j, c in enumerate(chosen):
         tr, sc = c["traj"](), c["scene"]
         tc = _tc(tr)
-        _energy_map(axs[0, j], tr, sc, tc, cbar=False,
-                    title=f"K1 = {c['k1']:g} N/m, v0 = {c['v0']:g}")
+        im = _energy_map(axs[0, j], tr, sc, tc, cbar=False,
+                         title=f"K1 = {c['k1']:g} N/m, v0 = {c['v0']:g}")
         axs[1, j].plot(tr.time / tc, an.effective_damping(tr, sc), color="C3", lw=1.2)
         axs[1, j].set(xlabel="time / T_c", ylabel="C_eff / C_+" if j == 0 else "")
-    fig.suptitle("(a) kinetic energy maps and (b) effective damping for four sweep cases")
-    fig.tight_layout()
+    fig.colorbar(im, ax=axs[0, :], label="T_i / max_j T_j", pad=0.01)  # one norm, 0 to 1
+    fig.suptitle("(a) kinetic energy maps (cyan: cluster boundaries) and (b) effective damping "
+                 "for four sweep cases")
     _save(fig, path)
     return {"cases": [(c["k1"], c["v0"]) for c in chosen]}
 
 
 def fig_b(cases, paths) -> dict:
     """B1: energy maps of every case; B2: C_eff / C_+ of every case with its representative
-    segment shaded; B3: the smoothed re-clustering rate of every case."""
+    segment shaded; B3: the smoothed re-clustering rate of every case.
+
+    Every panel of a figure shares its time axis (time / T_c, from 0 to the longest case's end:
+    the runs have one duration, 400 time units in the paper's sweep, which is fewer of its own
+    T_c for a case with a slow pulse); tick labels are ``TICK_PT`` points; each figure has one
+    colour bar for all its panels: B1 the normalized kinetic energy, B2 the line colour
+    C_eff / C_+ (clipped at 100, like the axes), B3 the line colour the rate on one log scale
+    for every case (the y axes keep one scale per row, since the rates grow ~100x from the
+    weakest impulse to the strongest)."""
     plt = _plt()
+    from matplotlib.colors import LogNorm, Normalize
+    from matplotlib.ticker import MaxNLocator
+
     k1s = sorted({c["k1"] for c in cases})
     v0s = sorted({c["v0"] for c in cases})
-    # B3's rates grow ~100x from the weakest to the strongest impulse: one scale per row
     figs = [_grid_axes(plt, k1s, v0s, sharey=share) for share in (True, True, "row")]
+    mappables = [None, None, None]
+    drawn = []  # B2 and B3 need the colour scale of every case first: keep their curves only
     for c in cases:
         i, j = v0s.index(c["v0"]), k1s.index(c["k1"])
         tr, sc = c["traj"](), c["scene"]
         tc = _tc(tr)
-        _energy_map(figs[0][1][i, j], tr, sc, tc, cbar=False, boundaries=False)
+        mappables[0] = _energy_map(figs[0][1][i, j], tr, sc, tc, cbar=False, boundaries=False)
         cbar = an.effective_damping(tr, sc)
         rc = an.analyze_reclustering(tr, sc, cbar)
-        ax = figs[1][1][i, j]
-        ax.plot(tr.time / tc, cbar, color="C3", lw=0.7)
         m = an.representative_segment(rc.segments, rc.segment_c_eff, 0.5 * tc)
-        if m >= 0:
-            ax.axvspan(rc.segments.start[m] / tc, rc.segments.end[m] / tc, color="C1", alpha=0.5)
+        span = (rc.segments.start[m] / tc, rc.segments.end[m] / tc) if m >= 0 else None
+        drawn.append((i, j, tr.time / tc, cbar, rc.rate, span))
+    t_start = min(float(d[2][0]) for d in drawn)
+    t_end = max(float(d[2][-1]) for d in drawn)
+    rate_max = max([float(np.max(d[4])) for d in drawn] + [0.0])
+    c_norm = Normalize(0.0, 100.0)
+    r_norm = LogNorm(rate_max * 1e-3, rate_max) if rate_max > 0 else LogNorm(1e-3, 1.0)
+    row_max = [0.0] * len(v0s)
+    for i, j, t, cbar, rate, span in drawn:
+        ax = figs[1][1][i, j]
+        if span is not None:
+            ax.axvspan(*span, color="0.8", zorder=0)
+        mappables[1] = _colored_line(ax, t, cbar, np.clip(cbar, 0.0, 100.0), c_norm,
+                                     "viridis", lw=1.0)
         ax.set_ylim(0, 100)
-        figs[2][1][i, j].plot(tr.time / tc, rc.rate, color="C0", lw=0.7)
-        for f in figs:
-            a = f[1][i, j]
-            a.tick_params(labelsize=6)
+        mappables[2] = _colored_line(figs[2][1][i, j], t, rate,
+                                     np.maximum(rate, r_norm.vmin), r_norm, "viridis", lw=1.0)
+        row_max[i] = max(row_max[i], float(np.max(rate)))
+    for fig, axs in figs:
+        for a in axs.flat:
             a.set(xlabel="", ylabel="", title="")
-    titles = ["B1: kinetic energy maps (bead vs time / T_c; each case to t = 400, i.e. to a "
-              "different number of its own T_c)",
-              "B2: C_eff / C_+ (0-100) against time / T_c (shaded: representative segment, "
-              "t >= T_c/2)",
-              "B3: smoothed re-clustering rate (clusters per time unit; one scale per row) "
-              "against time / T_c"]
-    for (fig, axs), title, path in zip(figs, titles, paths):
+            a.tick_params(labelsize=TICK_PT)
+            a.xaxis.set_major_locator(MaxNLocator(nbins=4))
+        axs[0, 0].set_xlim(t_start, t_end)  # shared by every panel of the figure
+    for i, row in enumerate(figs[2][1]):  # one y scale per row, from 0 to its largest rate
+        row[0].set_ylim(0.0, 1.08 * row_max[i] if row_max[i] > 0 else 1.0)
+    labels = ["kinetic energy per bead\nT_i / max_j T_j (dimensionless)",
+              "effective damping C_eff / C_+\n(dimensionless; axes clipped at 100)",
+              "re-clustering rate, log scale\n(new clusters per time unit 1/q)"]
+    extend = ["neither", "max", "min"]
+    titles = ["B1: kinetic energy maps, bead against time / T_c\n(blank: after the run's end)",
+              "B2: effective damping C_eff / C_+ against time / T_c\n(grey: representative "
+              "segment, starting at t >= T_c/2)",
+              "B3: smoothed re-clustering rate against time / T_c\n(y: one scale per row; "
+              "colour: one scale for every panel)"]
+    ylabel = ["bead", "C_eff / C_+", "rate (1/q)"]
+    for (fig, axs), title, path, mp, lab, ext, yl in zip(figs, titles, paths, mappables, labels,
+                                                         extend, ylabel):
+        if mp is not None:
+            _grid_colorbar(fig, mp, lab, ext)
         for j, k in enumerate(k1s):
-            axs[0, j].set_title(f"K1 = {k:g} N/m", fontsize=7)
+            axs[0, j].set_title(f"K1 = {k:g} N/m", fontsize=TICK_PT + 1)
         for i, v in enumerate(v0s):
-            axs[i, 0].set_ylabel(f"v0 = {v:g}", fontsize=7)
-        fig.suptitle(title + "\nrows: impulse v0, columns: substrate stiffness K1", fontsize=10)
-        fig.tight_layout(rect=(0, 0, 1, 0.97))
+            axs[i, 0].set_ylabel(f"v0 = {v:g}", fontsize=TICK_PT + 1)
+        fig.supxlabel("time / T_c (one range for every panel; a run lasts a different number "
+                      "of its own T_c)", fontsize=TICK_PT + 1, y=0.15 / fig.get_size_inches()[1])
+        fig.supylabel(f"rows: impulse v0 (p q); y: {yl}", fontsize=TICK_PT + 1,
+                      x=0.12 / fig.get_size_inches()[0])
+        fig.suptitle(f"{title}\ncolumns: substrate stiffness K1", fontsize=10,
+                     y=1 - 0.08 / fig.get_size_inches()[1], va="top")
         _save(fig, path)
     return {"grid": [len(v0s), len(k1s)]}
 

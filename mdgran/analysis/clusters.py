@@ -23,11 +23,17 @@ The events that form new clusters split the run into segments; events closer tha
 cascade (three contacts within 0.03 in micro-star) does not make segments of vanishing length,
 the "numerical artifacts" of the paper's discretization (Appendix A, Sec. VI).
 
-**Appendix A.**  Smoothed ``N(t)``: cubic spline through ``(t_0, 0)`` (the start pinned to the
+**Appendix A.**  Smoothed ``N(t)``: a curve through ``(t_0, 0)`` (the start pinned to the
 origin), the midpoints of the inner segments at their ``N``, and the start of the last segment at
-its ``N`` with zero slope, constant after (flat over the final stable segment); then the
-smoothing spline of :mod:`.effective_damping` over the frames; its derivative is the
-re-clustering rate (slightly negative values are smoothing artifacts, as in the paper).
+its ``N`` with zero slope, constant after (flat over the final stable segment); then smoothed
+over the frames with the cut-off period of :mod:`.effective_damping`; its derivative is the
+re-clustering rate.  The paper joins the knots by a cubic spline and smooths with a smoothing
+spline: both overshoot (the spline between unequal steps, the smoothing spline's equivalent
+kernel has negative lobes), which drew negative rates of cluster formation.  Here the curve is
+the monotone cubic (PCHIP slopes) through the same knots, so its increments are never
+negative, and the increments are smoothed with a Gaussian kernel (non-negative, reflected at
+both ends so no count is lost), so the rate is never negative, integrates to the number of newly
+formed clusters, and the smoothed ``N(t)`` is non-decreasing (:func:`smoothed_cumulative`).
 Segment ``m`` ``[t_m, t_(m+1))``: mean ``C_eff`` over it, and rate
 ``r_m = (N_(m+1) - N_m) / (t_(m+1) - t_m)`` (the slope joining the leading edges of segment ``m``
 and ``m+1`` in Fig. A1c; undefined, NaN, for the last segment).  The representative segment of a
@@ -39,9 +45,8 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
-from .effective_damping import SMOOTHING_TIME, smoothing_spline
+from .effective_damping import SMOOTHING_TIME
 
 #: Events closer than this (time units 1/q) form one re-clustering event.  About half the fast
 #: intra-cluster period (2.3 for the paper's chains).
@@ -227,19 +232,46 @@ def smoothed_cumulative(time, segs: Segments, smoothing_time: float = SMOOTHING_
     """Appendix A.A: smooth ``N(t)`` and its derivative, the re-clustering rate, on ``time``.
 
     Returns ``(N_smooth [F], rate [F])``; rate in clusters per time unit (1/q).
+
+    ``N`` through the Appendix A knots (see the module docstring) is the monotone cubic
+    (PCHIP slopes, zero slope at the last knot), so its increment ``m_i`` over each frame
+    interval is >= 0.  The increments are convolved with a normalized Gaussian of standard
+    deviation ``sigma = smoothing_time sqrt(2 ln 2) / (2 pi)`` (in frames), whose transfer
+    function passes the period ``smoothing_time`` at half amplitude, as the smoothing spline of
+    :mod:`.effective_damping` does, but with no negative lobe; the kernel is reflected at both
+    ends of ``time`` (a symmetric, mass-preserving operator), so the increments still add up to
+    ``N`` at the end.  The rate at a frame is the mean density of the two intervals beside it;
+    ``N_smooth`` is its running trapezoid integral.  Hence ``rate >= 0``, ``N_smooth`` is
+    non-decreasing from 0, and on a uniform grid ``N_smooth[-1]`` (the rate's trapezoid
+    integral) equals the number of newly formed clusters inside ``time``'s span to round-off.
+    ``smoothing_time <= 0``: no smoothing (the monotone curve's own increments).
     """
+    from scipy.interpolate import CubicHermiteSpline, PchipInterpolator
+    from scipy.ndimage import gaussian_filter1d
+
     time = np.asarray(time, float)
     m = len(segs)
-    if m == 1:
+    if m == 1 or len(time) < 2:
         return np.zeros_like(time), np.zeros_like(time)
     mid = 0.5 * (segs.start + segs.end)
     kt = np.concatenate(([segs.start[0]], mid[1:-1], [segs.start[-1]]))
-    kv = np.concatenate(([0.0], segs.cumulative[1:-1], [segs.cumulative[-1]]))
-    spline = CubicSpline(kt, kv, bc_type=((2, 0.0), (1, 0.0)))
-    curve = np.where(time < segs.start[-1], spline(np.minimum(time, segs.start[-1])),
-                     segs.cumulative[-1])
-    smooth = smoothing_spline(time, curve, smoothing_time)
-    return smooth(time), smooth.derivative()(time)
+    kv = np.concatenate(([0.0], segs.cumulative[1:-1], [segs.cumulative[-1]])).astype(float)
+    slope = PchipInterpolator(kt, kv).derivative()(kt)
+    slope[-1] = 0.0  # flat into the final stable segment; 0 keeps the cubic monotone
+    curve = CubicHermiteSpline(kt, kv, np.maximum(slope, 0.0))(np.clip(time, kt[0], kt[-1]))
+    mass = np.maximum(np.diff(curve), 0.0)  # clusters formed in each frame interval
+    width = np.diff(time)
+    if smoothing_time > 0 and len(mass) > 1:
+        sigma = smoothing_time * np.sqrt(2.0 * np.log(2.0)) / (2.0 * np.pi) / np.mean(width)
+        # the kernel must fit in the interval for the reflection to keep every count
+        sigma = min(sigma, (len(mass) - 1) / 8.0)
+        mass = gaussian_filter1d(mass, sigma, mode="reflect", truncate=4.0)
+        mass = np.maximum(mass, 0.0)  # round-off only: the kernel has no negative weight
+    rate = np.empty_like(time)
+    rate[0], rate[-1] = mass[0] / width[0], mass[-1] / width[-1]
+    rate[1:-1] = (mass[:-1] + mass[1:]) / (width[:-1] + width[1:])
+    smooth = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * width)))
+    return smooth, rate
 
 
 def segment_means(time, values, segs: Segments) -> np.ndarray:
