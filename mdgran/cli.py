@@ -203,6 +203,18 @@ def interrupted_line(exc: KeyboardInterrupt, out: str) -> str:
             "--checkpoint 0, a backend that cannot checkpoint, or none written yet)")
 
 
+def _events_in(path, default):
+    """The number of events the finished file ``path`` holds (all of them, also those before
+    a resume, which the backend's counter does not see); ``default`` if it cannot be read."""
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return int(f["events/time"].shape[0])
+    except Exception:  # noqa: BLE001 - the summary line falls back to the backend's count
+        return default
+
+
 def cmd_run(args) -> int:
     from .backends.base import IntegrationError
     from .simulation import LEDGER_EXCEEDED, run
@@ -229,7 +241,8 @@ def cmd_run(args) -> int:
     if not args.quiet and mpi_rank() == 0:
         st = res.stats
         print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
-              f"{st.get('events', '?')} events, wall {st.get('wall_time_s', float('nan')):.2f} s, "
+              f"{_events_in(args.out, st.get('events', '?'))} events, "
+              f"wall {st.get('wall_time_s', float('nan')):.2f} s, "
               f"ledger error {res.max_ledger_error:.2e} of E_imp (bound {res.ledger_bound:.2e})")
         if res.trajectory is not None:
             from .budget import format_budget, term_budget

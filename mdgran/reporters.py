@@ -10,8 +10,11 @@ bound), ``"failed: ..."``, or ``"interrupted"``).
   run completes or fails (a failed run's file holds every frame so far and says so in
   ``/parameters`` attribute ``status``).  An interrupted or killed run leaves nothing under the
   requested name; with checkpoints on, it leaves ``NAME.h5.partial`` to resume from.
-* :class:`MemoryReporter` collects a :class:`~mdgran.trajectory.Trajectory`.
-* :class:`ProgressReporter` draws a progress bar on stderr for runs longer than ~2 s.
+  With ``output.contacts`` on it also stores per-contact time series (compression, force,
+  state) under ``/observables/contacts`` (``docs/output.md``).
+* :class:`MemoryReporter` collects a :class:`~mdgran.trajectory.Trajectory` (with the
+  contacts' states per frame).
+* :class:`ProgressReporter` (in :mod:`mdgran.progress`) draws a labelled progress bar on stderr.
 """
 from __future__ import annotations
 
@@ -28,6 +31,15 @@ from .storage import OutputLock, StorageError, abandon, reason
 from .trajectory import LEDGER_NAMES, Trajectory
 
 H5MD_BLOCK = 512  # frames buffered in memory between writes
+#: per-contact time series under /observables/contacts (``output.contacts``): name -> dtype,
+#: unit (nondimensional, physics.md section 1), description
+CONTACT_SERIES = {
+    "compression": ("f8", "p", "contact compression delta = x_left - x_right - initial_gap"),
+    "force": ("f8", "eta", "normal force of the contact law on the attached branch plus the "
+              "unilateral damping c d(delta)/dt, on closed contacts; 0 on open ones "
+              "(ChainModel.contact_forces: the force the backend integrates)"),
+    "closed": ("i1", "", "contact state: 1 = closed, 0 = open"),
+}
 
 
 def software_versions() -> dict:
@@ -48,10 +60,11 @@ def software_versions() -> dict:
 
 
 class MemoryReporter:
-    """Keeps every frame in memory; ``trajectory()`` returns them as arrays."""
+    """Keeps every frame in memory; ``trajectory()`` returns them as arrays, with the
+    contacts' states (``Trajectory.closed``, ``[frames, n_contacts]`` bool)."""
 
     def __init__(self):
-        self.time, self.x, self.v = [], [], []
+        self.time, self.x, self.v, self.closed = [], [], [], []
         self.ledger = {k: [] for k in LEDGER_NAMES}
         self.events = []
         self.status = None
@@ -60,6 +73,7 @@ class MemoryReporter:
         self.time.append(frame.time)
         self.x.append(frame.x)
         self.v.append(frame.v)
+        self.closed.append(np.array(frame.closed, dtype=bool))
         for k in LEDGER_NAMES:
             self.ledger[k].append(ledger[k])
         self.events.extend(frame.events)
@@ -75,7 +89,8 @@ class MemoryReporter:
             ev_time=np.array([e.time for e in ev], dtype=float),
             ev_contact=np.array([e.contact for e in ev], dtype=np.int64),
             ev_kind=np.array([e.kind for e in ev], dtype=np.int8),
-            scene_toml=scene_toml, backend=backend, attrs={"status": self.status})
+            scene_toml=scene_toml, backend=backend, attrs={"status": self.status},
+            closed=np.array(self.closed, dtype=bool) if self.closed else None)
 
 
 class H5MDWriter:
@@ -84,11 +99,18 @@ class H5MDWriter:
     The writer holds ``NAME.lock`` (:class:`~mdgran.storage.OutputLock`) from its start to
     its close, so a second run on the same name is refused.  A write the file system refuses
     (full disk, quota) raises :class:`~mdgran.storage.StorageError` after the temporary is
-    removed; the requested name is never touched."""
+    removed; the requested name is never touched.
+
+    ``contacts`` (default: the scene's ``output.contacts``) adds the per-contact time series
+    ``/observables/contacts/{compression,force,closed}`` (:data:`CONTACT_SERIES`), computed
+    from each frame's ``x``, ``v`` and ``closed`` with the scene's
+    :class:`~mdgran.chain.ChainModel`.  ``/parameters`` attribute ``mpi_ranks`` records the
+    number of MPI ranks the run was split over (:meth:`mpi_ranks_of`; ``backend``, default
+    the object whose method ``state_source`` is, tells which backend ran)."""
 
     def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
                  stats_source=None, checkpoint_every: float | None = None, state_source=None,
-                 resume: bool = False):
+                 resume: bool = False, contacts: bool | None = None, backend=None):
         """``checkpoint_every`` (seconds of wall time) makes the run resumable: the file is
         filled under the fixed name ``NAME.h5.partial`` with a checkpoint (the backend's
         ``state_source()`` at the last written frame; :mod:`mdgran.checkpoint`), which an
@@ -111,6 +133,12 @@ class H5MDWriter:
         self.scene = scene
         self.model_n = int(scene.data["chain"]["n"])
         self.positions = scene.data["output"]["positions"] if positions is None else positions
+        self.contacts = (bool(scene.data["output"].get("contacts", False)) if contacts is None
+                         else bool(contacts))
+        self.model = None  # the ChainModel, built when the contacts are stored
+        self.backend = backend if backend is not None else getattr(state_source, "__self__",
+                                                                   None)
+        self.mpi_ranks = None  # known once the backend has started (first frame)
         self.stats_source = stats_source
         self.f = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -172,7 +200,9 @@ class H5MDWriter:
     def _series_paths(self, f) -> list:
         chain = [f"particles/chain/{name}" for name in ("displacement", "velocity", "position")
                  if f"particles/chain/{name}" in f]
-        return chain + [f"observables/{name}" for name in LEDGER_NAMES]
+        contacts = ([f"observables/contacts/{name}" for name in CONTACT_SERIES]
+                    if "observables/contacts" in f else [])
+        return chain + [f"observables/{name}" for name in LEDGER_NAMES] + contacts
 
     def _rows(self, meta) -> dict:
         """Dataset path -> rows that a checkpoint with ``meta`` continues (checksummed)."""
@@ -192,6 +222,12 @@ class H5MDWriter:
         self.positions = "position" in chain
         for name in LEDGER_NAMES:
             self._series[name] = {k: obs[f"{name}/{k}"] for k in ("step", "time", "value")}
+        self.contacts = "contacts" in obs
+        if self.contacts:
+            self._contact_model()
+            for name in CONTACT_SERIES:
+                self._series[f"contacts/{name}"] = {k: obs[f"contacts/{name}/{k}"]
+                                                    for k in ("step", "time", "value")}
         for series in self._series.values():
             for ds in series.values():
                 ds.resize(self._frames, axis=0)
@@ -231,6 +267,8 @@ class H5MDWriter:
         sc = self.scene.scales
         if sc is not None:
             par.attrs["scales"] = json.dumps(sc.as_dict())
+        par.attrs["mpi_ranks"] = np.int64(self.mpi_ranks_of(self.backend))  # again at the end
+        par.attrs["mpi_world_size"] = np.int64(self.mpi_world_size())
         chain = f.create_group("particles/chain")
         self._series = {}
         for name in ("displacement", "velocity"):
@@ -257,6 +295,20 @@ class H5MDWriter:
         obs = f.create_group("observables")
         for name in LEDGER_NAMES:
             self._series[name] = self._make_series(obs, name, ())
+        if self.contacts:
+            model = self._contact_model()
+            g = obs.create_group("contacts")
+            g.attrs["contact"] = np.asarray(model.contact_numbers, dtype=np.int64)
+            g.attrs["numbering"] = ("value column j is contact number contact[j]; contact i joins "
+                                    "bead i-1 and bead i (beads 0, n+1: walls), as in /events")
+            for name, (dtype, unit, doc) in CONTACT_SERIES.items():
+                series = self._make_series(g, name, (model.n_contacts,), dtype)
+                if unit:
+                    series["value"].attrs["unit"] = unit
+                series["value"].attrs["description"] = doc
+                self._series[f"contacts/{name}"] = series
+            g["force"].attrs["damping"] = float(model.damping)
+            g["force"].attrs["includes_damping"] = np.int8(bool(model.damping))
         ev = f.create_group("events")
         self._ev = {k: ev.create_dataset(k, (0,), maxshape=(None,), dtype=dt, chunks=(4096,))
                     for k, dt in (("time", "f8"), ("contact", "i8"), ("kind", "i1"))}
@@ -264,19 +316,71 @@ class H5MDWriter:
         ev.attrs["contact"] = "contact i joins bead i-1 and bead i (beads 0, n+1: walls)"
 
     @staticmethod
-    def _make_series(parent, name, shape):
+    def _make_series(parent, name, shape, dtype="f8"):
         g = parent.create_group(name)
         chunk = max(1, min(1024, (1 << 18) // max(1, int(np.prod(shape)))))
         return {
             "step": g.create_dataset("step", (0,), maxshape=(None,), dtype="i8", chunks=(4096,)),
             "time": g.create_dataset("time", (0,), maxshape=(None,), dtype="f8", chunks=(4096,)),
             "value": g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape,
-                                      dtype="f8", chunks=(chunk,) + shape),
+                                      dtype=dtype, chunks=(chunk,) + shape),
         }
+
+    def _contact_model(self):
+        if self.model is None:
+            from .chain import model_from_scene
+
+            self.model = model_from_scene(self.scene)
+        return self.model
+
+    # ---- MPI ---------------------------------------------------------------------------------
+    @staticmethod
+    def mpi_world_size() -> int:
+        """Processes of the MPI job this process belongs to, from the launcher's environment
+        (MPICH/Hydra ``PMI_SIZE``, Open MPI ``OMPI_COMM_WORLD_SIZE``); 1 outside mpiexec."""
+        for var in ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE"):
+            try:
+                return max(1, int(os.environ[var]))
+            except (KeyError, ValueError):
+                continue
+        return 1
+
+    @classmethod
+    def mpi_ranks_of(cls, backend) -> int:
+        """The number of MPI ranks a run on ``backend`` is split over: the size of the
+        communicator the backend exposes (its ``comm``, as the LAMMPS backend takes one, or
+        its running LAMMPS instance's ``world_size``); 1 for a backend that takes no
+        communicator (reference, fast: every rank would compute the whole chain); for an
+        unknown backend (None), :meth:`mpi_world_size`."""
+        if backend is None:
+            return cls.mpi_world_size()
+        comm = getattr(backend, "comm", None)
+        if comm is not None:
+            try:
+                return int(comm.Get_size())
+            except Exception:  # noqa: BLE001 - not an mpi4py communicator
+                pass
+        lmp = getattr(backend, "lmp", None)
+        if lmp is not None:
+            try:
+                return int(lmp.extract_setting("world_size"))
+            except Exception:  # noqa: BLE001 - closed or not started
+                pass
+        if "comm" not in getattr(backend, "accepted_options", ()):
+            return 1
+        return cls.mpi_world_size()
 
     # ---- frames ----------------------------------------------------------------------------
     def report(self, frame, ledger):
-        self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger))
+        if self.mpi_ranks is None:  # the backend has started: its communicator is known
+            self.mpi_ranks = self.mpi_ranks_of(self.backend)
+        per_contact = None
+        if self.contacts:
+            m = self.model
+            per_contact = (m.compressions(frame.x), m.contact_forces(frame.x, frame.v,
+                                                                     frame.closed),
+                           np.asarray(frame.closed, dtype=np.int8).copy())
+        self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger, per_contact))
         self._events.extend(frame.events)
         self._last_step = frame.step
         if len(self._buf) >= H5MD_BLOCK:
@@ -323,6 +427,11 @@ class H5MDWriter:
             for name in LEDGER_NAMES:
                 self._append(f"observables/{name}", self._series[name], steps, times,
                              np.array([b[4][name] for b in self._buf]))
+            if self.contacts:
+                for j, name in enumerate(CONTACT_SERIES):
+                    key = f"contacts/{name}"
+                    self._append(f"observables/{key}", self._series[key], steps, times,
+                                 np.array([b[5][j] for b in self._buf]))
             self._frames += len(self._buf)
             self._buf = []
         if self._events:
@@ -363,6 +472,8 @@ class H5MDWriter:
             del self.f["checkpoint"]
         par = self.f["parameters"]
         par.attrs["status"] = status
+        if self.mpi_ranks is not None:
+            par.attrs["mpi_ranks"] = np.int64(self.mpi_ranks)
         if self.stats_source is not None:
             par.attrs["backend_stats"] = json.dumps(self.stats_source(), default=float)
         self.f.flush()  # a full disk fails here, while the file can still be closed cleanly
@@ -373,35 +484,4 @@ class H5MDWriter:
         self._series, self._ev = {}, {}
 
 
-class ProgressReporter:
-    """A progress bar on stderr, shown once a run has taken more than ``delay`` seconds."""
-
-    def __init__(self, t_end: float, label: str = "", delay: float = 2.0, stream=None):
-        self.t_end = t_end
-        self.label = label
-        self.delay = delay
-        self.stream = stream or sys.stderr
-        self.start = _time.perf_counter()
-        self.last = 0.0
-        self.shown = False
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-
-    def report(self, frame, ledger):
-        now = _time.perf_counter()
-        el = now - self.start
-        if el < self.delay or now - self.last < (0.2 if self.tty else 10.0):
-            return
-        self.last = now
-        frac = min(1.0, frame.time / self.t_end) if self.t_end > 0 else 1.0
-        eta = el * (1.0 - frac) / frac if frac > 0 else float("nan")
-        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        line = (f"{self.label} [{bar}] {100 * frac:5.1f}%  t = {frame.time:.4g}/{self.t_end:.4g}"
-                f"  elapsed {el:.0f}s  left ~{eta:.0f}s")
-        self.stream.write(("\r" + line) if self.tty else (line + "\n"))
-        self.stream.flush()
-        self.shown = True
-
-    def close(self, status):
-        if self.shown and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
+from .progress import ProgressReporter  # noqa: E402,F401 - moved to mdgran.progress

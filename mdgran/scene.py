@@ -25,10 +25,11 @@ value came from is in :attr:`Scene.sources` (and ``lambda_source`` in ``mdgran i
 backends cannot work or the numbers are not representable; they are checked on the
 nondimensional values, so also after the SI conversion (an error then names both keys):
 
-* ``|impulse.velocity| <= 1e3`` (p per time unit, 15x the paper's largest): faster impulses
-  compress contacts by hundreds of p, where double precision no longer resolves the reference's
-  absolute event tolerance (1e-13 p) and its event location stalls (measured: v0 = 1e4 stalls
-  at t = 1.58 on micro-star; 1e3 runs).
+* ``|impulse.velocity| <= 5e3`` (p per time unit, 80x the paper's largest; the macro chain
+  matched to micro-star in m/s needs 3.8e3): faster impulses compress contacts by thousands of
+  p, where double precision no longer resolves the reference's absolute event tolerance
+  (1e-13 p) and its event location stalls (measured: v0 = 1e4 stalls at t = 1.58 on
+  micro-star; +-5e3 runs on micro-star, 3.8e3 on macro-hertz).
 * ``substrate.k1 <= 1e6`` and ``substrate.k3 <= 1e6`` (eta/p and eta/p^3; the contact's own
   stiffness is of order 1): stiffer, the substrate period ``2 pi / sqrt(k1)`` falls below 6e-3
   time units and a run needs many millions of steps (at 1e300 the step size underflows).
@@ -75,7 +76,7 @@ class SceneError(ValueError):
 
 #: key -> (lowest, highest) allowed (see the module doc; ``velocity`` bounds |v|)
 LIMITS = {
-    "impulse.velocity": (-1e3, 1e3),
+    "impulse.velocity": (-5e3, 5e3),
     "substrate.k1": (0.0, 1e6),
     "substrate.k3": (0.0, 1e6),
     "contact.damping": (0.0, 1e3),
@@ -167,6 +168,10 @@ SCHEMA = {
     "output": {
         "positions": Key(True, "bool", "true or false (store H5MD position; false for long "
                          "chains)", "", "store the H5MD position element"),
+        "contacts": Key(False, "bool", "true or false (store per-contact compression, force "
+                        "and state; 17 bytes per contact per frame)", "",
+                        "store /observables/contacts/{compression,force,closed} per frame "
+                        "(docs/output.md); off by default: 17 bytes x contacts per frame"),
     },
     "material": {
         "diameter": Key(None, "float>0?", "a number in [1e-9, 10] (m)", "m", "bead diameter",

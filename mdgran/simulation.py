@@ -116,18 +116,22 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
     H5MD writer's buffer (``H5MD_BLOCK`` frames of x and v and their copies at a flush, plus 3
-    arrays of positions), the frames kept in memory (``keep``: x and v, and the copies made
-    for the trajectory, plus ~500 bytes of Python objects per frame); on disk x, v (and
-    positions) and the six observables, each with its step and time."""
+    arrays of positions, plus 17 bytes per contact with ``output.contacts``), the frames kept
+    in memory (``keep``: x and v, and the copies made for the trajectory, plus ~500 bytes of
+    Python objects per frame); on disk x, v (and positions, and the per-contact series) and
+    the six observables, each with its step and time."""
     from .reporters import H5MD_BLOCK
 
     n = int(scene.data["chain"]["n"])
     r = scene.data["run"]
     frames = int(float(r["duration"]) / float(r["output_interval"]) + 1e-9) + 1
     pos = 3 if scene.data["output"]["positions"] else 0
+    con = 17.0 / 8.0 if scene.data["output"].get("contacts") else 0.0  # 2 f8 + 1 i1 per contact
     block = min(frames, H5MD_BLOCK)
-    memory = 8.0 * n * (10 + block * (4 + pos)) + (frames * (4 * 8.0 * n + 500) if keep else 0)
-    disk = frames * (8.0 * n * (2 + pos) + 16.0 * (2 + (pos > 0)) + 6 * 24.0)
+    memory = 8.0 * n * (10 + block * (4 + pos + con)) + (frames * (4 * 8.0 * n + 500) if keep
+                                                          else 0)
+    disk = frames * (8.0 * n * (2 + pos + con) + 16.0 * (2 + (pos > 0) + 3 * (con > 0))
+                     + 6 * 24.0)
     return {"n": n, "frames": frames, "memory": memory, "disk": disk}
 
 
@@ -206,7 +210,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         if not b.can_checkpoint and not (resume and partial_path(out).exists()):
             checkpoint_every = None  # nothing to checkpoint; a resume is refused by the writer
         try:
-            writer = H5MDWriter(out, scene, b.name, stats_source=lambda: b.stats,
+            writer = H5MDWriter(out, scene, b.name, backend=b, stats_source=lambda: b.stats,
                                 checkpoint_every=checkpoint_every,
                                 state_source=b.checkpoint_state, resume=resume)
         except CheckpointError as exc:

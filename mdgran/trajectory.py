@@ -38,7 +38,11 @@ class Trajectory:
         backend: name of the backend that computed the run.
         attrs: more about the run: ``status`` (``"complete"``, ``"failed: ..."``,
             ``"ledger-exceeded: ..."``), ``scene_name``; read from a file, every attribute of
-            its ``/parameters`` group (versions, units, backend_stats, ...).
+            its ``/parameters`` group (versions, units, backend_stats, ``mpi_ranks``, ...).
+        closed: ``[F, n_contacts]`` bool, the state of every contact at every frame (True =
+            closed), column ``j`` being contact number ``contact_numbers[j]``; or None (a file
+            written without ``output.contacts``).  Filled by a run in memory, and read from
+            ``/observables/contacts/closed`` by :func:`read_h5`.
     """
 
     time: np.ndarray  # [F]
@@ -51,6 +55,7 @@ class Trajectory:
     scene_toml: str = ""
     backend: str = ""
     attrs: dict = field(default_factory=dict)
+    closed: np.ndarray | None = None  # [F, n_contacts] bool, or None
 
     @property
     def n(self) -> int:
@@ -61,6 +66,17 @@ class Trajectory:
     def frames(self) -> int:
         """Number of stored frames."""
         return len(self.time)
+
+    @property
+    def contact_numbers(self) -> np.ndarray:
+        """Contract numbers of the contacts, the columns of :attr:`closed`: 1..n+1 with walls,
+        2..n for a free chain (from the stored scene's ``chain.boundary``; fixed if unknown)."""
+        free = False
+        if self.scene_toml:
+            from .scene import tomllib
+
+            free = tomllib.loads(self.scene_toml).get("chain", {}).get("boundary") == "free"
+        return np.arange(2, self.n + 1) if free else np.arange(1, self.n + 2)
 
     @property
     def e0(self) -> float:
@@ -123,6 +139,9 @@ def read_h5(path) -> Trajectory:
         led = {name: f[f"observables/{name}/value"][()] for name in LEDGER_NAMES}
         attrs = {k: (v.decode() if isinstance(v, bytes) else v)
                  for k, v in f["parameters"].attrs.items()}
+        closed = None
+        if "observables/contacts/closed/value" in f:
+            closed = f["observables/contacts/closed/value"][()].astype(bool)
         return Trajectory(
             time=chain["displacement/time"][()],
             x=chain["displacement/value"][()],
@@ -134,4 +153,5 @@ def read_h5(path) -> Trajectory:
             scene_toml=str(attrs.get("scene", "")),
             backend=str(attrs.get("backend", "")),
             attrs=attrs,
+            closed=closed,
         )
