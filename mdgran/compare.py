@@ -99,21 +99,70 @@ def bead_difference(a, b) -> np.ndarray:
     return np.max(np.abs(a.x[:m] - b.x[:m]), axis=1)
 
 
-def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEMBLE) -> BackendRuns:
+def refinement_text(scene, overrides) -> str:
+    """``tol/100``, ``dt/2``: what a refinement's overrides do, for progress labels."""
+    parts = []
+    for key, value in overrides:
+        sec, _, name = key.partition(".")
+        short = {"tolerance": "tol"}.get(name, name)
+        try:
+            ratio = float(scene.data[sec][name]) / float(value)
+            parts.append(f"{short}/{ratio:.3g}" if ratio >= 1 else f"{short}x{1 / ratio:.3g}")
+        except (KeyError, TypeError, ValueError, ZeroDivisionError):
+            parts.append(f"{key}={value}")
+    return ", ".join(parts)
+
+
+def run_plan(scene, backends, ensemble: int, refinements: dict) -> dict:
+    """The runs of a comparison, in order: ``{key: (backend, kind, role, duration)}`` (see
+    :class:`mdgran.progress.RunSeries`); ``refinements``: backend -> its refinement's
+    overrides."""
+    dur = float(scene.data["run"]["duration"])
+    plan = {}
+    for b in backends:
+        plan[(b, "nominal")] = (b, "nominal", f"{b} (as given)", dur)
+        plan[(b, "refined")] = (b, "refined", f"{b} refined "
+                                f"({refinement_text(scene, refinements[b])})", dur)
+        for k in range(1, ensemble + 1):
+            plan[(b, "ensemble", k)] = (b, "ensemble", f"{b} ensemble {k} of "
+                                        f"{ensemble} (impulse +{100 * k * ENSEMBLE_STEP:g}%)",
+                                        dur)
+    ref = backends[0]
+    plan[(ref, "perturbed")] = (ref, "perturbed", f"{ref} perturbed (impulse +{PERTURBATION:g}, "
+                                "predictability)", dur)
+    return plan
+
+
+def _run(series, key, scene, name, **kw):
+    """One run of the comparison, with its labelled progress line when ``series`` is given."""
+    if series is None:
+        return run(scene, name, **kw)
+    return series.run(key, run, scene, name, **kw)
+
+
+def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEMBLE,
+                series=None, refinement=None) -> BackendRuns:
+    """``name``'s nominal, refined and ensemble runs.  ``series`` (a
+    :class:`~mdgran.progress.RunSeries` holding :func:`run_plan`'s keys) draws their labelled
+    progress; without it, ``progress`` gives each run :func:`~mdgran.simulation.run`'s own
+    bar.  ``refinement``: ``(overrides, factor)``, if already known."""
     from .simulation import make_backend
 
-    overrides, factor = make_backend(scene, name).refinement(scene)
+    overrides, factor = refinement or make_backend(scene, name).refinement(scene)
+    prog = progress and series is None
     t0 = _time.perf_counter()
     out = Path(out_dir) / f"{name}.h5" if out_dir is not None else None
-    res = run(scene, name, out=out, progress=progress)
+    res = _run(series, (name, "nominal"), scene, name, out=out, progress=prog)
     nominal = res.trajectory
     wall = _time.perf_counter() - t0
-    res_refined = run(scene.with_overrides(overrides), name, progress=progress)
+    res_refined = _run(series, (name, "refined"), scene.with_overrides(overrides), name,
+                       progress=prog)
     refined = res_refined.trajectory
     v0 = float(scene.data["impulse"]["velocity"])
     members = [nominal, refined] + [
-        run(scene.with_overrides([("impulse.velocity", v0 * (1 + k * ENSEMBLE_STEP))]), name,
-            progress=progress).trajectory for k in range(1, ensemble + 1)]
+        _run(series, (name, "ensemble", k),
+             scene.with_overrides([("impulse.velocity", v0 * (1 + k * ENSEMBLE_STEP))]), name,
+             progress=prog).trajectory for k in range(1, ensemble + 1)]
     return BackendRuns(name, nominal, refined, factor * bead_difference(nominal, refined),
                        factor, wall, res.max_ledger_error, res_refined.max_ledger_error,
                        members, res.status, res.ledger_bound)
@@ -152,11 +201,12 @@ def cluster_statistics(scene, ref: BackendRuns, other: BackendRuns, t_horizon: f
     return crit, info
 
 
-def predictability(scene, ref: BackendRuns) -> dict:
+def predictability(scene, ref: BackendRuns, series=None) -> dict:
     """Growth of a 1e-12 impulse perturbation in the reference."""
     v0 = float(scene.data["impulse"]["velocity"])
-    pert = run(scene.with_overrides([("impulse.velocity", v0 * (1 + PERTURBATION))]),
-               ref.name).trajectory
+    pert = _run(series, (ref.name, "perturbed"),
+                scene.with_overrides([("impulse.velocity", v0 * (1 + PERTURBATION))]),
+                ref.name).trajectory
     d = bead_difference(ref.nominal, pert)
     t = ref.nominal.time[: len(d)]
     k1 = int(np.searchsorted(t, min(1.0, t[-1])))
@@ -297,14 +347,41 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
 
 
 def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=False,
-            ensemble: int = ENSEMBLE) -> dict:
+            ensemble: int = ENSEMBLE, stream=None, progress_interval: float | None = None
+            ) -> dict:
     """Run ``backends`` (the first is the reference) on ``scene`` and judge them; writes
-    ``report.json``, ``report.md`` and figures into ``out_dir`` when given."""
+    ``report.json``, ``report.md`` and figures into ``out_dir`` when given.
+
+    ``progress``: a line per run on ``stream`` (standard error) with its role, ``run k of N``
+    and the time left for all runs (:class:`mdgran.progress.RunSeries`); on a terminal it is
+    redrawn in place, elsewhere a line when each run starts and ends and one every
+    ``progress_interval`` seconds (default 15) in between."""
+    from .simulation import make_backend
+
+    backends = tuple(backends)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
-    runs = [run_backend(scene, b, out_dir, progress, ensemble) for b in backends]
+    series = None
+    refinements = {b: make_backend(scene, b).refinement(scene) for b in backends}
+    if progress:
+        from .progress import RunSeries
+
+        plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
+        series = RunSeries(plan, stream=stream, interval=progress_interval)
+        series.say(f"compare {scene.name}: {len(plan)} runs to t = "
+                   f"{float(scene.data['run']['duration']):g} ({', '.join(backends)}: as "
+                   f"given, refined{f', {ensemble} ensemble members' if ensemble else ''}; "
+                   f"{backends[0]} perturbed by {PERTURBATION:g})")
+    runs = [run_backend(scene, b, out_dir, progress, ensemble, series, refinements[b])
+            for b in backends]
     ref = runs[0]
-    pred = predictability(scene, ref)
+    pred = predictability(scene, ref, series)
+    if series is not None:
+        from .progress import fmt_seconds
+
+        series.say(f"compare {scene.name}: {len(series.keys)} runs done in "
+                   f"{fmt_seconds(series.elapsed())}; judging"
+                   + (" and writing the report" if out_dir is not None else ""))
     criteria, pairs = [], {}
     for other in runs[1:]:
         crit, info = judge(scene, ref, other, pred)

@@ -149,12 +149,15 @@ def case_summary(scene, result) -> dict:
 
 
 def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
-             comm_self: bool = False) -> dict:
+             comm_self: bool = False, progress_every: float | None = None) -> dict:
     """Run one case (in a worker process); returns its summary.  The run is a run of its own
     (``collective=False``): on an MPI worker rank it writes its ``.h5`` whatever the rank.
     ``comm_self``: the case runs on an MPI worker rank, so a backend that takes a communicator
     (LAMMPS) gets ``MPI.COMM_SELF``, not ``MPI_COMM_WORLD`` (which the pool's ranks share: a
-    LAMMPS instance on it would wait for every rank and deadlock)."""
+    LAMMPS instance on it would wait for every rank and deadlock).  ``progress_every``
+    (seconds): keep ``cases/NNNN.progress`` holding the case's simulated time while it runs
+    (:class:`mdgran.progress.ProgressFile`; the main process reads it for its progress
+    lines)."""
     from .simulation import run
 
     cases = Path(out_dir) / "cases"
@@ -168,8 +171,14 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
             from mpi4py import MPI
 
             options["comm"] = MPI.COMM_SELF
+    reporters = []
+    if progress_every:
+        from .progress import ProgressFile
+
+        reporters.append(ProgressFile(cases / f"{stem}.progress",
+                                      float(scene.data["run"]["duration"]), progress_every))
     res = run(scene, backend, out=cases / f"{stem}.h5", raise_errors=False, collective=False,
-              **options)
+              reporters=reporters, **options)
     summary = {"index": case["index"], "params": case["params"], **case_summary(scene, res)}
     _atomic_json(cases / f"{stem}.json", summary)
     return summary
@@ -286,12 +295,14 @@ def _death(exitcode) -> str:
 WORKER_DEATHS = 2
 
 
-def _run_processes(todo, args_of, fn, workers: int, out: Path, done):
+def _run_processes(todo, args_of, fn, workers: int, out: Path, done, tick=None,
+                   tick_every: float = 1.0):
     """Run ``todo`` on ``workers`` processes; ``done(case, summary)`` for each finished one.
     A case raising anything is recorded failed (reason on one line); a worker that dies is
     replaced and its case run again, and recorded failed when it killed its worker
     :data:`WORKER_DEATHS` times.  Any exception here (Ctrl-C, SIGTERM) kills the workers at
-    once and propagates: finished cases stay, the others run on the next call."""
+    once and propagates: finished cases stay, the others run on the next call.  ``tick(running
+    case indices)`` is called at least every ``tick_every`` seconds (progress lines)."""
     import collections
     import multiprocessing
     from multiprocessing.connection import wait
@@ -319,7 +330,10 @@ def _run_processes(todo, args_of, fn, workers: int, out: Path, done):
             if not busy:  # every idle worker died before taking a case: replace them
                 _time.sleep(0.05)
                 continue
-            ready = wait([w.conn for w in busy] + [w.proc.sentinel for w in busy])
+            ready = wait([w.conn for w in busy] + [w.proc.sentinel for w in busy],
+                         timeout=tick_every if tick is not None else None)
+            if tick is not None:
+                tick([w.case["index"] for w in pool if w.case is not None])
             for i, w in enumerate(pool):
                 if w.case is None or (w.conn not in ready and w.proc.sentinel not in ready):
                     continue
@@ -340,6 +354,7 @@ def _run_processes(todo, args_of, fn, workers: int, out: Path, done):
                 w.conn.close()
                 for stale in (out / "cases").glob(f"*.tmp-{w.proc.pid}"):
                     stale.unlink(missing_ok=True)
+                (out / "cases" / f"{case['index']:04d}.progress").unlink(missing_ok=True)
                 pool[i] = _Worker(ctx, fn)
                 deaths[case["index"]] = deaths.get(case["index"], 0) + 1
                 if deaths[case["index"]] >= WORKER_DEATHS:
@@ -355,20 +370,28 @@ def _run_processes(todo, args_of, fn, workers: int, out: Path, done):
         w.stop(kill=False)
 
 
-def _run_futures(pool, todo, args_of, fn, out: Path, done):
+def _run_futures(pool, todo, args_of, fn, out: Path, done, tick=None, tick_every: float = 1.0):
     """The same over a ``concurrent.futures`` executor (mpi4py's ``MPIPoolExecutor``): a case
-    raising anything is recorded failed; an interrupt cancels the queued cases."""
-    from concurrent.futures import as_completed
+    raising anything is recorded failed; an interrupt cancels the queued cases.  ``tick(None)``
+    is called at least every ``tick_every`` seconds (the executor does not say which cases
+    run: the progress lines find them by their progress files)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
 
     try:
         futs = {pool.submit(_call_case, fn, args_of(c)): c for c in todo}
-        for fut in as_completed(futs):
-            case = futs[fut]
-            try:
-                kind, value = fut.result()
-            except Exception as exc:  # noqa: BLE001 - the executor's own failure
-                kind, value = "error", f"the executor failed on it: {one_line(exc)}"
-            done(case, value if kind == "ok" else _failed_case(case, out, value))
+        pending = set(futs)
+        while pending:
+            finished, pending = wait(pending, timeout=tick_every if tick is not None else None,
+                                     return_when=FIRST_COMPLETED)
+            for fut in finished:
+                case = futs[fut]
+                try:
+                    kind, value = fut.result()
+                except Exception as exc:  # noqa: BLE001 - the executor's own failure
+                    kind, value = "error", f"the executor failed on it: {one_line(exc)}"
+                done(case, value if kind == "ok" else _failed_case(case, out, value))
+            if tick is not None:
+                tick(None)
     except BaseException:
         pool.shutdown(wait=False, cancel_futures=True)
         raise
@@ -422,7 +445,8 @@ def _mpi_executor(workers: int):
 
 def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
               overrides=(), progress=True, stream=None, small: bool = False,
-              backend: str | None = None, case_fn=None) -> list:
+              backend: str | None = None, case_fn=None,
+              progress_interval: float | None = None) -> list:
     """Run every unfinished case of ``spec``; returns all case summaries (finished ones read
     back from disk), sorted by case index.  ``backend`` replaces the spec's backend; a folder
     holds one sweep on one backend, so resuming it on another is refused.
@@ -432,7 +456,13 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     sweep goes on.  Ctrl-C or SIGTERM stops the workers at once and raises
     :class:`KeyboardInterrupt` (:class:`mdgran.signals.Interrupted` for a signal): the finished cases
     stay, and the same call runs the rest.  ``case_fn`` replaces :func:`run_case` (same
-    arguments; a module-level function, for tests)."""
+    arguments; a module-level function, for tests).
+
+    ``progress``: lines on ``stream`` (standard error): cases done, the running cases'
+    simulated times (their workers keep ``cases/NNNN.progress`` files), elapsed and time left
+    (:class:`mdgran.progress.SweepProgress`); on a terminal one line redrawn at most every
+    ``progress_interval`` seconds (default 1), elsewhere a line per finished case and, between,
+    one after ``progress_interval`` (default 15) seconds of silence."""
     from .backends import BACKENDS
 
     if executor not in ("process", "mpi"):
@@ -465,44 +495,55 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                              f"{before.get('backend')!r}); use a new folder")
     pool = _mpi_executor(workers) if executor == "mpi" and pending_cases(sweep, out) else None
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    for stale in (out / "cases").glob("*.tmp-*"):  # left by a killed sweep (one sweep per DIR)
-        stale.unlink()
+    for pattern in ("*.tmp-*", "*.progress"):  # left by a killed sweep (one sweep per DIR)
+        for stale in (out / "cases").glob(pattern):
+            stale.unlink()
     _atomic_json(out / "sweep.json", {k: v for k, v in sweep.items() if k != "small"})
     todo = pending_cases(sweep, out)
     total, done0 = len(sweep["cases"]), len(sweep["cases"]) - len(todo)
-    start = _time.perf_counter()
     if progress and done0:
-        print(f"{sweep['name']}: {done0} of {total} cases already done, resuming", file=stream)
+        print(f"sweep {sweep['name']}: {done0} of {total} cases already done, resuming",
+              file=stream, flush=True)
     fn = case_fn or run_case
     mpi = executor == "mpi"
+    status = None
+    if progress:
+        from .progress import SweepProgress
+
+        status = SweepProgress(sweep["name"], total, done0, len(todo), out / "cases", stream,
+                               progress_interval)
+    # workers rewrite their case's progress file at most this often (the main process reads it)
+    every = max(0.1, min(2.0, status.interval / 2)) if status is not None else None
 
     def args_of(c):
-        return (sweep["scene"], sweep["backend"], c, str(out)) + ((True,) if mpi else ())
+        return (sweep["scene"], sweep["backend"], c, str(out), mpi, every)
 
-    count = [0]
+    running = [None]  # the running cases' indices, where the executor says
 
     def done(case, summary):
-        count[0] += 1
-        if not progress:
-            return
-        k = count[0]
-        el = _time.perf_counter() - start
-        left = el / k * (len(todo) - k)
-        frac = (done0 + k) / total
-        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        st = str(summary.get("status", ""))
-        note = f"  case {case['index']:04d} {st}" if st.startswith("failed") else ""
-        print(f"{sweep['name']} [{bar}] {done0 + k}/{total} cases  elapsed {el:.0f}s  "
-              f"left ~{left:.0f}s{note}", file=stream, flush=True)
+        (out / "cases" / f"{case['index']:04d}.progress").unlink(missing_ok=True)
+        if status is not None:
+            status.case_done(case, summary, running[0])
+
+    def tick(indices):
+        running[0] = indices
+        status.tick(indices)
 
     if todo:
+        tick_every = min(1.0, status.interval) if status is not None else 1.0
         try:
             with interrupting():
                 if mpi:
-                    _run_futures(pool, todo, args_of, fn, out, done)
+                    _run_futures(pool, todo, args_of, fn, out, done,
+                                 tick if status is not None else None, tick_every)
                 else:
-                    _run_processes(todo, args_of, fn, workers, out, done)
+                    _run_processes(todo, args_of, fn, workers, out, done,
+                                   tick if status is not None else None, tick_every)
         finally:
+            if status is not None:
+                status.finish()
+            for stale in (out / "cases").glob("*.progress"):
+                stale.unlink(missing_ok=True)
             if not mpi:  # the workers are stopped: what they were writing goes
                 for stale in (out / "cases").glob("*.tmp-*"):
                     stale.unlink(missing_ok=True)

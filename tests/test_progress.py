@@ -1,0 +1,154 @@
+"""Progress output (issue 16): every run's line ends at 100 % or at its status, a redrawn line
+leaves nothing of the previous one, compare lines say their role and "run k of N", and a sweep
+names its running cases with their simulated time while they run."""
+import io
+import re
+from dataclasses import dataclass
+
+import pytest
+
+from mdgran.progress import ProgressReporter, RunSeries, Terminal, fmt_seconds
+from mdgran.scene import load_scene
+from mdgran.simulation import run
+
+
+class FakeTTY(io.StringIO):
+    def isatty(self):
+        return True
+
+
+@dataclass
+class Frame:
+    time: float
+
+
+def screen(text: str) -> list:
+    """What a terminal shows: ``\\r`` returns to column 0 and overwrites, ``\\n`` ends the
+    line.  Also checks every draw: right after it, the visible line is exactly what was drawn
+    (nothing left over from a longer line before it)."""
+    lines = []
+    for physical in text.split("\n"):
+        cur: list = []
+        for seg in physical.split("\r"):
+            cur[: len(seg)] = list(seg)
+            if seg:
+                visible = "".join(cur).rstrip()
+                assert visible == seg.rstrip(), f"leftovers: {visible!r} after drawing {seg!r}"
+        lines.append("".join(cur).rstrip())
+    return [ln for ln in lines if ln]
+
+
+def test_screen_emulation_catches_leftovers():
+    with pytest.raises(AssertionError, match="leftovers"):
+        screen("\rleft ~10s0s\rleft ~0s")
+    assert screen("\rabc   \rab    \n") == ["ab"]
+
+
+def test_fmt_seconds():
+    assert [fmt_seconds(s) for s in (0.04, 3.0, 42.4, 185, 3725)] == \
+        ["0s", "3s", "42s", "3m05s", "1h02m"]
+    assert fmt_seconds(float("nan")) == "?"
+
+
+def test_reporter_ends_at_100_percent_and_pads_over_longer_lines():
+    """A line drawn just before the end (here: at 17 %) is not the last word: close() draws
+    100 %; a shorter line after a longer one is padded over it."""
+    out = FakeTTY()
+    rep = ProgressReporter(400.0, label="micro-star [reference]", delay=0.0, stream=out,
+                           interval=0.0, width=200)
+    rep.report(Frame(0.0), None)
+    rep.label = "micro-star [reference] with a much longer label for one draw"
+    rep.report(Frame(68.0), None)
+    rep.label = "micro-star [reference]"
+    rep.report(Frame(69.0), None)
+    rep.interval = 1e9  # no redraw between here and the end: the bar would stay at 17 %
+    rep.report(Frame(400.0), None)
+    rep.close("complete")
+    shown = screen(out.getvalue())
+    assert len(shown) == 1 and out.getvalue().endswith("\n")
+    assert "100%" in shown[0] and "done in" in shown[0] and "t = 400/400" in shown[0]
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_run_progress_ends_with_100_percent_or_the_status(tty, interrupt_at):
+    sc = load_scene("micro-star", [("run.duration", 20.0)])
+    out = FakeTTY() if tty else io.StringIO()
+    rep = ProgressReporter(20.0, label="micro-star [reference]", delay=0.0, stream=out,
+                           interval=0.01 if tty else 0.3, width=120)
+    rep.start()
+    run(sc, "reference", reporters=[rep])
+    lines = screen(out.getvalue())
+    assert lines[-1].startswith("micro-star [reference]") and "100%" in lines[-1]
+    assert "done in" in lines[-1]
+    if tty:
+        assert len(lines) == 1  # one line, redrawn in place
+    else:  # sparse: a line at the start, one at the end, at most one per 0.3 s between
+        assert lines[0].endswith("starting") and len(lines) <= 2 + rep.elapsed() / 0.3 + 1
+    # an interrupted run: its line stops where it stopped, with the status word
+    out2 = FakeTTY() if tty else io.StringIO()
+    rep = ProgressReporter(20.0, label="micro-star [reference]", delay=0.0, stream=out2,
+                           interval=0.0, width=120)
+    rep.start()
+    with pytest.raises(KeyboardInterrupt):
+        run(sc, "reference", reporters=[rep, interrupt_at(5.0)])
+    last = screen(out2.getvalue())[-1]
+    assert "interrupted after" in last and "100%" not in last
+    assert re.search(r"\b(2[0-9])%", last)  # stopped at t ~ 5 of 20
+
+
+def test_narrow_terminal_lines_fit_and_keep_their_role():
+    out = FakeTTY()
+    series = RunSeries({("reference", "nominal"): ("reference", "nominal",
+                                                     "reference ensemble 3 of 3 (impulse +0.3%)",
+                                                     10.0)}, stream=out, interval=0.0,
+                       width=72)
+    rep = series.reporter(("reference", "nominal"))
+    rep.start()
+    for t in (0.0, 1.0, 5.0, 10.0):
+        rep.report(Frame(t), None)
+    rep.close("complete")
+    lines = screen(out.getvalue())
+    assert len(lines) == 1 and len(lines[0]) <= 71
+    assert lines[0].startswith("run 1 of 1  reference ens") and "100%" in lines[0]
+    assert Terminal(io.StringIO()).tty is False
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
+    from mdgran.compare import compare
+
+    monkeypatch.setenv("COLUMNS", "200")
+    out = FakeTTY() if tty else io.StringIO()
+    sc = load_scene("micro-star", [("run.duration", 10.0)])
+    compare(sc, ("reference", "fast"), progress=True, ensemble=0, stream=out,
+            progress_interval=0.02 if tty else 1.0)
+    lines = screen(out.getvalue())
+    roles = ["reference (as given)", "reference refined (tol/100)", "fast (as given)",
+             "fast refined (dt/2)", "reference perturbed"]
+    assert lines[0].startswith("compare micro-star: 5 runs")
+    assert lines[-1].startswith("compare micro-star: 5 runs done")
+    for k, role in enumerate(roles, 1):
+        mine = [ln for ln in lines if ln.startswith(f"run {k} of 5  {role}")]
+        assert mine, (role, lines)
+        assert "100%" in mine[-1] and "done in" in mine[-1] and "all runs left" in mine[-1]
+        assert len(mine) == (1 if tty else len(mine))
+    last_run = [ln for ln in lines if ln.startswith("run 5 of 5")][-1]
+    assert "all runs left ~0s" in last_run
+
+
+def test_sweep_names_running_cases_while_they_run(tmp_path):
+    from mdgran.sweep import run_sweep
+
+    spec = tmp_path / "slow.toml"
+    spec.write_text('[sweep]\nscene = "micro-star"\nbackend = "reference"\n\n[fixed]\n'
+                    '"run.duration" = 40.0\n\n[grid]\n"impulse.velocity" = [1.0, 2.0]\n')
+    out = io.StringIO()
+    res = run_sweep(str(spec), tmp_path / "sw", workers=2, stream=out, progress_interval=0.3)
+    assert [r["status"] for r in res] == ["complete", "complete"]
+    lines = out.getvalue().splitlines()
+    running = [ln for ln in lines if re.search(r"running: case 000[01] at t = [0-9.]+/40", ln)]
+    assert running, lines
+    assert re.match(r"sweep slow: 0/2 cases done, elapsed \S+, left ~\S+; [12] running",
+                    running[0])
+    assert lines[-1].startswith("sweep slow: 2/2 cases done in ")
+    assert not list((tmp_path / "sw" / "cases").glob("*.progress"))
