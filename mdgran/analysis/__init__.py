@@ -9,6 +9,7 @@ Modules, one idea each (all nondimensional, bead mass 1, time in 1/q, energy in 
 * :mod:`.maps`: spatio-temporal maps (kinetic energy, relative velocity, cluster boundaries).
 * :mod:`.pulse`: primary pulse speed and the characteristic period ``T_c``.
 * :mod:`.coincidence`: do C_eff peaks coincide with re-clustering-rate peaks?
+* :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives (issue 14).
 
 :func:`run_summary` condenses a run into scalars for :mod:`mdgran.sweep`.
 """
@@ -22,12 +23,20 @@ from .clusters import (MERGE_WITHIN, Cluster, ClusterHistory, ReclusteringAnalys
                        analyze_reclustering, cluster_history, clusters_of, contact_states,
                        new_clusters, reclustering_events, representative_segment, scene_layout,
                        segment_means, segments, smoothed_cumulative, trajectory_history)
-from .coincidence import coincidence_fraction, coincidence_test, peak_times, run_coincidence
-from .effective_damping import (SMOOTHING_TIME, c_eff, contact_damping, decay_time,
+from .coincidence import (channel_coincidence, coincidence_case, coincidence_fraction,
+                          coincidence_shift_test, coincidence_test, peak_times,
+                          pooled_channel_coincidence, pooled_coincidence_test, run_coincidence,
+                          shifted_fractions)
+from .effective_damping import (CHANNELS, SMOOTHING_TIME, c_eff, channel_damping,
+                                contact_damping, decay_time, dissipated_channels,
                                 dissipated_energy, effective_damping, envelope_mean,
                                 smoothed_kinetic, smoothing_effect, smoothing_spline)
 from .maps import (boundary_map, cluster_labels, kinetic_energy_map, relative_velocity_map,
                    states_map)
+from .nulls import (NullCase, case_of_run, fig7_points, fig7_slope, fig7_statistic,
+                    max_mean, null_case, null_summary, random_late, random_late_null,
+                    rate_damping_correlation, rate_damping_null, segment_statistic, swap_cases,
+                    synthetic_case, time_shift)
 from .modes import (cluster_modes, cluster_modes_in_run, equilibrium_modes, modes,
                     stiffness_matrix)
 from .pulse import characteristic_period, primary_pulse_speed, pulse_duration

@@ -87,3 +87,141 @@ def run_coincidence(traj, scene, window: float | None = None, t_range=None,
     out = coincidence_test(a, b, window, t0, t1, n_shifts, seed)
     out.update(c_eff_peaks=a, rate_peaks=b, t_range=(t0, t1))
     return out
+
+
+# ---- vectorized shift nulls (many shifts, p not at its floor) ---------------------------------
+def shifted_fractions(a, b, window: float, t_start: float, t_end: float, shifts,
+                      chunk: int = 2000) -> np.ndarray:
+    """:func:`coincidence_fraction` of ``a`` with ``b`` shifted circularly by each of
+    ``shifts`` [K] (time units) over ``[t_start, t_end)``: [K] (NaN if no ``a``)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    shifts = np.asarray(shifts, float)
+    if len(a) == 0:
+        return np.full(len(shifts), np.nan)
+    if len(b) == 0:
+        return np.zeros(len(shifts))
+    length = t_end - t_start
+    out = np.empty(len(shifts))
+    for i in range(0, len(shifts), chunk):
+        bb = t_start + (b[None, :] - t_start + shifts[i:i + chunk, None]) % length  # [k, nb]
+        near = np.min(np.abs(a[None, :, None] - bb[:, None, :]), axis=2) <= window  # [k, na]
+        out[i:i + chunk] = np.mean(near, axis=1)
+    return out
+
+
+def _z(obs, null) -> float:
+    sd = float(np.std(null))
+    return float((obs - np.mean(null)) / sd) if sd > 0 else float("nan")
+
+
+def coincidence_shift_test(a, b, window: float, t_start: float, t_end: float,
+                           n_shifts: int = 10000, seed: int = 0) -> dict:
+    """:func:`coincidence_test`, vectorized (same shifts for the same seed, so the same null and
+    p-value), for many shifts; adds ``n_shifts`` and ``p_floor = 1 / (1 + n_shifts)``."""
+    rng = np.random.default_rng(seed)
+    obs = coincidence_fraction(a, b, window)
+    null = shifted_fractions(a, b, window, t_start, t_end,
+                             rng.uniform(0.0, t_end - t_start, n_shifts))
+    return {"fraction": obs, "null_mean": float(np.mean(null)), "null_std": float(np.std(null)),
+            "p_value": float((1 + np.sum(null >= obs)) / (1 + n_shifts)),
+            "n_a": int(len(a)), "n_b": int(len(b)), "window": float(window),
+            "n_shifts": int(n_shifts), "p_floor": 1.0 / (1 + n_shifts),
+            "z": _z(obs, null), "null": null}
+
+
+def coincidence_case(time, c_eff, rate, window: float, t_range=None, prominence: float = 0.1):
+    """One case's input to :func:`pooled_coincidence_test`: ``(a, b, window, t0, t1)`` with
+    ``a`` the ``C_eff`` peaks and ``b`` the rate peaks in ``t_range`` (default the whole run);
+    None if either has no peak."""
+    t0, t1 = (float(time[0]), float(time[-1])) if t_range is None else map(float, t_range)
+    a = peak_times(time, c_eff, prominence, (t0, t1))
+    b = peak_times(time, rate, prominence, (t0, t1))
+    return (a, b, float(window), t0, t1) if len(a) and len(b) else None
+
+
+def pooled_coincidence_test(per_case, n_shifts: int = 10000, seed: int = 0) -> dict:
+    """Coincidence pooled over cases: the fraction of all ``a`` peaks within their case's window
+    of a ``b`` peak of their case, against every case's ``b`` shifted circularly and
+    independently (``per_case``: :func:`coincidence_case` tuples; None entries are skipped).
+    The shifts are drawn as ``mdgran.study.pooled_coincidence`` draws them (same seed, same
+    null), all at once.  Returns ``cases``, ``c_eff_peaks``, ``rate_peaks``, ``fraction``,
+    ``null_mean``, ``null_std``, ``p_value``, ``n_shifts``, ``p_floor``, ``z`` (``(fraction -
+    null_mean) / null_std``: when p is at its floor, how far beyond), ``null`` [K]."""
+    per_case = [p for p in per_case if p is not None]
+    n_a = sum(len(p[0]) for p in per_case)
+    if not n_a:
+        return {"cases": 0}
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(size=(n_shifts, len(per_case)))
+    obs = sum(coincidence_fraction(a, b, w) * len(a) for a, b, w, _, _ in per_case) / n_a
+    null = np.zeros(n_shifts)
+    for (a, b, w, t0, t1), s in zip(per_case, u.T):
+        null += shifted_fractions(a, b, w, t0, t1, s * (t1 - t0)) * len(a)
+    null /= n_a
+    return {"cases": len(per_case), "c_eff_peaks": n_a,
+            "rate_peaks": sum(len(p[1]) for p in per_case), "fraction": float(obs),
+            "null_mean": float(null.mean()), "null_std": float(null.std()),
+            "p_value": float((1 + np.sum(null >= obs)) / (1 + n_shifts)),
+            "n_shifts": int(n_shifts), "p_floor": 1.0 / (1 + n_shifts),
+            "z": _z(obs, null), "null": null}
+
+
+def channel_coincidence(traj, scene, window: float | None = None, t_range=None,
+                        prominence: float = 0.1, n_shifts: int = 10000, seed: int = 0,
+                        smoothing_time: float = SMOOTHING_TIME,
+                        merge_within: float = MERGE_WITHIN) -> dict:
+    """:func:`run_coincidence` for ``C_eff`` from each dissipation channel
+    (:func:`~.effective_damping.channel_damping`): ``{"total", "viscous", "hysteresis"}`` ->
+    :func:`coincidence_shift_test` result (with ``c_eff_peaks``, ``rate_peaks``,
+    ``t_range``), the same rate peaks and shifts for all three."""
+    from .effective_damping import channel_damping
+
+    ch = channel_damping(traj, scene, smoothing_time)
+    rc = analyze_reclustering(traj, scene, ch["total"], smoothing_time, merge_within)
+    t0, t1 = (float(traj.time[0]), float(traj.time[-1])) if t_range is None else t_range
+    window = characteristic_period(traj) if window is None else window
+    b = peak_times(traj.time, rc.rate, prominence, (t0, t1))
+    out = {}
+    for name, cbar in ch.items():
+        a = peak_times(traj.time, cbar, prominence, (t0, t1))
+        r = coincidence_shift_test(a, b, window, t0, t1, n_shifts, seed)
+        r.update(c_eff_peaks=a, rate_peaks=b, t_range=(t0, t1))
+        out[name] = r
+    return out
+
+
+def pooled_channel_coincidence(cases, window_frac: float = 0.25, prominence: float = 0.1,
+                               active: bool = True, n_shifts: int = 10000,
+                               seed: int = 0) -> dict:
+    """:func:`pooled_coincidence_test` for each dissipation channel over sweep cases.
+
+    ``cases``: mappings with ``"curves" = (time, c_eff_total, rate)``, ``"channels" = {name:
+    c_eff [F]}`` (e.g. :func:`~.effective_damping.channel_damping` without ``"total"``),
+    ``"characteristic_period"`` and ``"last_reclustering_time"`` (the rows of
+    ``mdgran.study.sweep_cases`` plus ``"channels"``).  Window ``window_frac x T_c``; ``active``:
+    each case from its start to one ``T_c`` after its last re-clustering event (as
+    ``study.pooled_coincidence(active=True)``).  Returns ``{"total", name...}`` -> result (without
+    ``null``), each with ``window_T_c``, ``prominence``, ``range``."""
+    per = {}
+    for c in cases:
+        time, total, rate = c["curves"]
+        tc = c.get("characteristic_period")
+        if tc is None or not np.isfinite(tc):
+            continue
+        t0, t1 = float(time[0]), float(time[-1])
+        if active:
+            last = c.get("last_reclustering_time")
+            if last is None:
+                continue
+            t1 = min(t1, last + tc)
+        for name, cbar in {"total": total, **c.get("channels", {})}.items():
+            per.setdefault(name, []).append(
+                coincidence_case(time, cbar, rate, window_frac * tc, (t0, t1), prominence))
+    out = {}
+    for name, pc in per.items():
+        r = pooled_coincidence_test(pc, n_shifts, seed)
+        r.pop("null", None)
+        r.update(window_T_c=window_frac, prominence=prominence,
+                 range="active part" if active else "whole run")
+        out[name] = r
+    return out

@@ -143,3 +143,31 @@ def decay_time(t, kinetic, fraction: float = float(np.exp(-1.0)),
     tt = envelope_mean(t, kinetic, interpolant)
     below = np.nonzero(tt < fraction * kinetic[0])[0]
     return float(t[below[0]]) if len(below) else float("nan")
+
+
+#: The ledger's dissipation channels, name -> ledger key.
+CHANNELS = {"viscous": "dissipated_viscous", "hysteresis": "dissipated_hysteresis"}
+
+
+def dissipated_channels(traj) -> dict:
+    """``E_d`` of each channel from the ledger: ``{"viscous": [F], "hysteresis": [F]}`` (energy
+    units eta p); they add up to :func:`dissipated_energy`."""
+    return {name: np.asarray(traj.ledger[key], float) for name, key in CHANNELS.items()}
+
+
+def channel_damping(traj, scene, smoothing_time: float = SMOOTHING_TIME,
+                    interpolant: str = "cubic") -> dict:
+    """``C_eff / C_+`` [F] of Eq. 9 with ``E_d`` taken from one dissipation channel at a time:
+    ``{"total", "viscous", "hysteresis"}``.  ``C_eff`` is linear in ``E_d`` (the smoothing
+    spline and its derivative are linear, ``<<T>>`` is shared), so ``viscous + hysteresis`` is
+    ``total`` (:func:`effective_damping`) to round-off.  Hysteresis is booked at the snap-off
+    events that also form new clusters, so its peaks coincide with re-clustering partly by
+    construction; the viscous part carries no such bookkeeping link."""
+    kin = traj.ledger["kinetic_energy"]
+    cp = contact_damping(scene)
+    out = {"total": effective_damping(traj, scene, smoothing_time, interpolant)}
+    for name, ed in dissipated_channels(traj).items():
+        c = c_eff(traj.time, ed, kin, traj.n, smoothing_time=smoothing_time,
+                  interpolant=interpolant)
+        out[name] = c / cp if cp > 0 else c
+    return out
