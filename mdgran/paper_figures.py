@@ -461,3 +461,33 @@ def fig7(cases, path, rule: str = "", color_key: str = "k1",
     fig.tight_layout()
     _save(fig, path)
     return fit
+
+
+def fig_controls(controls_numbers: dict, path) -> dict:
+    """The controls (:mod:`mdgran.controls`): (a) ``T / T(0)`` averaged over one ``T_c``
+    against ``t / T_c`` for micro-star and the three macro variants; (b) micro over each
+    macro variant, with the line where they are equal."""
+    plt = _plt()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    vs = controls_numbers["vs_micro"]
+    styles = {"macro-pulse": ("C0", "-", "macro, Hertz, paper's matching"),
+              "macro-si": ("C2", "--", "macro, Hertz, matched in m/s"),
+              "macro-schwarz": ("C1", "-.", "macro, Schwarz at its own lambda")}
+    first = next(iter(vs.values()))["curves"]
+    ax.semilogy(first["s"], first["micro"], color="C3", lw=2.0, label="micro-star")
+    for name, (col, ls, label) in styles.items():
+        c = vs[name]["curves"]
+        ax.semilogy(c["s"], c["macro"], color=col, ls=ls, label=label)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            bx.semilogy(c["s"], c["micro"] / c["macro"], color=col, ls=ls,
+                        label=f"micro / {label}")
+    bx.axhline(1.0, color="k", lw=0.8, label="equal")
+    ax.set(xlabel="time / T_c (each chain's own)", ylabel="T / T(0), mean over one T_c",
+           title="(a) kinetic energy")
+    bx.set(xlabel="time / T_c", ylabel="ratio", title="(b) micro over macro (< 1: micro lower)")
+    for a in (ax, bx):
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    _save(fig, path)
+    plt.close(fig)
+    return {"path": str(path)}
