@@ -153,9 +153,9 @@ class FastBackend(Backend):
             if d < dmax:  # flagged inside the step (a trial or sub-step state), not at its end
                 raise IntegrationError(
                     f"contact {num} left the contact table (compression beyond delta_max = "
-                    f"{dmax:g}, or not finite) inside the step ending at t = {t:.12g}; its "
-                    f"compression there is {d:.4g}: run.dt = {self.dt:g} may be too large for "
-                    "this scene")
+                    f"{dmax:g}, or not finite) inside the step ending at t = {t:.12g}, where "
+                    f"its compression is {d:.4g}: a smaller run.dt (now {self.dt:g}) or a "
+                    "larger table would resolve it")
             raise IntegrationError(f"compression {d:.4g} beyond the contact table (delta_max ="
                                    f" {dmax:g}) at t = {t:.12g}, contact {num}")
         if status == K.CHATTER:
