@@ -56,6 +56,7 @@ the displacement rule that is the loop energy ``W``, to the accuracy of the even
 from __future__ import annotations
 
 import time as _time
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.integrate import DOP853
@@ -83,6 +84,35 @@ RTOL_FLOOR = 2.5e-14
 #: WATCH_STEPS * STEP_FLOOR * (1 + |t|), else the run stops (IntegrationError).
 STEP_FLOOR = 1e-12
 WATCH_STEPS = 1000
+
+
+@dataclass
+class _Loop:
+    """The event loop's state between steps (:meth:`ReferenceBackend.frames`).
+
+    ``t``, ``y`` (``[x, v, D_viscous]``), ``h_last`` (last step size), ``armed_out``
+    (contacts that start a segment on or over their switching point: a candidate again if
+    they end a step further out), ``post_event`` (tighten the next segment) and ``i_out``
+    (the frame index) are what a checkpoint stores (:meth:`ReferenceBackend._snap`, with the
+    backend's contact states and hysteresis loss); the rest is rebuilt on resume: the segment
+    ``target``, the ``pending`` contacts of an event being approached (``{contact:
+    was_closed}``), the right-hand side ``rhs``, the chatter guard's ``switches_here``, the
+    watchdog's ``watch_t`` and ``watch_n``, and the ``events`` since the last frame.
+    """
+
+    t: float
+    y: np.ndarray
+    h_last: float | None = None
+    armed_out: np.ndarray | None = None
+    post_event: bool = False
+    i_out: int = 0
+    target: float = 0.0
+    pending: dict | None = None
+    rhs: object = None
+    switches_here: dict = field(default_factory=dict)
+    watch_t: float = 0.0
+    watch_n: int = 0
+    events: list = field(default_factory=list)
 
 
 class ReferenceBackend(Backend):
@@ -220,6 +250,19 @@ class ReferenceBackend(Backend):
         ``STATE_TOL`` (the state invariant), or on or over it and moving outward."""
         return (g < -STATE_TOL) | ((g <= 0.0) & (gd < 0.0))
 
+    def _chatter_guard(self, count: dict, t, ks, y):
+        """The chatter guard: count one switch of each contact in ``ks`` at time ``t`` in
+        ``count[(t, k)]``; a contact switching more than ``MAX_SWITCHES_AT_ONE_INSTANT`` times
+        at one instant (Zeno chatter, module doc) stops the run with :class:`IntegrationError`
+        naming it."""
+        for k in ks:
+            count[(t, k)] = count.get((t, k), 0) + 1
+            if count[(t, k)] > MAX_SWITCHES_AT_ONE_INSTANT:
+                raise IntegrationError(
+                    f"contact {self.model.contact_numbers[k]} chatters at t = {t:.12g}: "
+                    f"it switches state more than {MAX_SWITCHES_AT_ONE_INSTANT} times "
+                    f"at one instant (delta = {self.model.compressions(y[:self.n])[k]:.3g})")
+
     def _settle(self, t, y, events) -> int:
         """Switch at once every contact that is :meth:`_outside` its state; returns how many
         switches were made.  This is what keeps the state invariant: it runs after every
@@ -233,13 +276,7 @@ class ReferenceBackend(Backend):
             if ks.size == 0:
                 return switched
             switched += ks.size
-            for k in ks:
-                count[k] = count.get(k, 0) + 1
-                if count[k] > MAX_SWITCHES_AT_ONE_INSTANT:
-                    raise IntegrationError(
-                        f"contact {self.model.contact_numbers[k]} chatters at t = {t:.12g}: "
-                        f"it switches state more than {MAX_SWITCHES_AT_ONE_INSTANT} times "
-                        f"at one instant (delta = {self.model.compressions(y[:self.n])[k]:.3g})")
+            self._chatter_guard(count, t, ks, y)
             self._switch(t, y, ks, events)
 
     # ---- main loop -----------------------------------------------------------------------
@@ -251,149 +288,217 @@ class ReferenceBackend(Backend):
     def frames(self, resume: dict | None = None):
         """Integrate the scene; yield a Frame at every output time.
 
-        The loop runs DOP853 from ``(t, y)`` towards ``target``: the next output time, so that
-        every stored frame is the integrator's own state, not an interpolant.  When an accepted step
-        ``[t0, t1]`` contains an event at ``te < t1``, the step is discarded and integration
-        restarts from ``(t0, y0)`` with ``target = te``, so the solver's own step-size control
-        resolves the approach to the event (at snap-off the force has a square-root
-        singularity that a dense-output polynomial across the kink would smear).  On reaching
-        the target, the pending contacts switch if they stand on their switching point
-        (``g <= EVENT_G_TOL``); if they fall short, the target moves on by ``g / |g'|``.
+        A flat loop over named steps, on one :class:`_Loop` state:
+
+        1. :meth:`_integrate`: DOP853 from ``(t, y)`` towards ``target``, the next output
+           time, so that every stored frame is the integrator's own state, not an
+           interpolant.  When an accepted step ``[t0, t1]`` contains an event at ``te < t1``
+           (:meth:`_locate`), the step is discarded and integration restarts from ``(t0, y0)``
+           with ``target = te``, so the solver's own step-size control resolves the approach
+           to the event (at snap-off the force has a square-root singularity that a
+           dense-output polynomial across the kink would smear).
+        2. :meth:`_arrive`: on reaching an event's target, the pending contacts switch if they
+           stand on their switching point (``g <= EVENT_G_TOL``); if they fall short, the
+           target moves on by ``g / |g'|``.
+        3. :meth:`_settle` (inside both): contacts outside their state switch at once.
+        4. :meth:`_output`: on reaching an output time, the frame and the checkpoint.
         """
-        m, n, tol = self.model, self.n, self.tol
         out_times = self.output_times()
-        events: list = []
         wall0 = _time.perf_counter()
         if resume is None:
-            imp = self.scene.data["impulse"]
-            x, v, closed = m.initial_state(int(imp["bead"]), float(imp["velocity"]))
-            self._closed = closed
-            self._d_hyst = 0.0
-            y = np.concatenate([x, v, [0.0]])
-            t = 0.0
-            self._settle(t, y, events)
-            h_last, post_event, i_out = None, False, 0
-            armed_out = self._g(y, self._closed)[0] <= 0.0
-            self._snapshot = self._snap(t, y, h_last, armed_out, post_event, i_out)
-            yield self._frame(0, 0.0, y, events)
-            events = []
+            s = self._start()
+            yield self._output(s, 0.0)
         else:
-            t, y = float(resume["t"]), np.array(resume["y"], dtype=float)
-            self._closed = np.array(resume["closed"], dtype=bool)
-            self._d_hyst = float(resume["d_hyst"])
-            h_last = None if resume["h_last"] is None else float(resume["h_last"])
-            armed_out = np.array(resume["armed_out"], dtype=bool)
-            post_event, i_out = bool(resume["post_event"]), int(resume["i_out"])
-        i_out += 1
-        if i_out >= len(out_times):
+            s = self._resume(resume)
+            s.i_out += 1
+        if s.i_out >= len(out_times):
             return
-        target, pending = float(out_times[i_out]), None
-        rhs = self._rhs_factory(self._closed.copy())
-        switches_here = {}
-        watch_t, watch_n = t, 0  # the watchdog (module doc)
+        s.target = float(out_times[s.i_out])
+        s.rhs = self._rhs_factory(self._closed.copy())
+        s.watch_t, s.watch_n = s.t, 0  # the watchdog (module doc)
         while True:
-            restart = None
-            if target > t:
-                self.stats["segments"] += 1
-                # Tighter tolerance (EVENT_TIGHTEN) for: the approach to an event (pending) and
-                # steps predicted to reach a singular switching point, where the force has a
-                # sqrt or delta^(3/2) singularity and a step's error estimate is weakest; and
-                # the steps up to the next output time after a switch (measured: micro-star to
-                # t = 60, ledger error 1.4e-9 -> 7.6e-11 of E_imp for 0.4 % more steps).
-                g0, gd0 = self._g(y, self._closed)
-                tight = pending is not None or post_event or self._near_snap_off(g0, gd0, h_last)
-                post_event = False
-                tl = tol * EVENT_TIGHTEN if tight else tol
-                with np.errstate(all="ignore"):  # overflow: the checks below say it, one line
-                    solver = DOP853(rhs, t, y, target, rtol=max(tl, RTOL_FLOOR), atol=tl,
-                                    first_step=min(h_last, target - t) if h_last else None)
-                accept_and_tighten = False
-                while solver.status == "running":
-                    t0, y0 = solver.t, solver.y.copy()
-                    with np.errstate(all="ignore"):  # overflow: the checks below say it, one line
-                        msg = solver.step()
-                    if solver.status == "failed":
-                        raise IntegrationError(f"integrator failed at t = {t0:.12g}: {msg}")
-                    self.stats["steps"] += 1
-                    t1, y1 = solver.t, solver.y
-                    if not np.all(np.isfinite(y1)):
-                        bad = int(np.flatnonzero(~np.isfinite(y1[:2 * n]))[0] % n) + 1
-                        raise IntegrationError(f"non-finite state at t = {t1:.12g}, bead {bad}")
-                    watch_n += 1
-                    if watch_n >= WATCH_STEPS:
-                        if t1 - watch_t < WATCH_STEPS * STEP_FLOOR * (1.0 + abs(t1)):
-                            raise IntegrationError(self._stalled(t1, y1, t1 - t0, t1 - watch_t,
-                                                                 rhs, pending))
-                        watch_t, watch_n = t1, 0
-                    g1, gd1 = self._g(y1, self._closed)
-                    sol = None
-                    if np.any(g1 < 0.0) or np.any((gd0 < 0.0) & (gd1 > 0.0)):
-                        sol = solver.dense_output()
-                        cands = self._candidates(sol, t0, t1, g0, gd0, g1, gd1, armed_out)
-                        if cands:
-                            te = min(c[0] for c in cands)
-                            if te < t1 - SIMULTANEOUS * (1.0 + abs(t1)):
-                                ks = {k: bool(self._closed[k]) for tc, k in cands
-                                      if tc <= te + SIMULTANEOUS * (1.0 + abs(te))}
-                                restart = (t0, y0, te, ks)
-                                h_last = max(te - t0, 1e-3 * (solver.step_size or 1.0))
-                                break
-                    if np.any(self._outside(g1, gd1)):
-                        break  # accepted with a contact outside (a root within SIMULTANEOUS
-                        # of the step end, or over its point): switch it there, below
-                    g0, gd0 = g1, gd1
-                    armed_out &= g1 <= 0.0
-                    if not tight and self._near_snap_off(g1, gd1, solver.h_abs):
-                        accept_and_tighten = True
-                        break
-                self.stats["rhs_evals"] += solver.nfev
-                if restart is None:
-                    t, y = solver.t, solver.y.copy()
-                    h_last = getattr(solver, "h_abs", None) or solver.step_size or h_last
-                    if self._settle(t, y, events):
-                        armed_out = self._g(y, self._closed)[0] <= 0.0
-                        rhs = self._rhs_factory(self._closed.copy())
-                        post_event = True
-                    if accept_and_tighten or t < target:
-                        continue
-            if restart is not None:
-                t, y, target, pending = restart
+            if s.target > s.t and not self._integrate(s):
+                continue  # stopped short of the target: go on from where it stopped
+            if s.pending is not None:  # at the end of an event's approach
+                self._arrive(s, out_times[s.i_out])
                 continue
-            if pending is None:  # reached an output time: the frame is the solver's own state
-                self._snapshot = self._snap(t, y, h_last, armed_out, post_event, i_out)
-                yield self._frame(i_out, out_times[i_out], y, events)
-                events = []
-                i_out += 1
-                if i_out == len(out_times):
-                    break
-                target = float(out_times[i_out])
-                continue
-            # the pending contacts still in the state they were located in (a settle on the
-            # way may have switched them already)
-            ks = sorted(k for k, was_closed in pending.items() if self._closed[k] == was_closed)
-            if not ks:
-                target, pending = float(out_times[i_out]), None
-                continue
-            g, gd = self._g(y, self._closed)
-            short = [k for k in ks if g[k] > EVENT_G_TOL and gd[k] < 0.0]
-            if short and (max(g[k] / -gd[k] for k in short) > 4e-16 * max(1.0, abs(t))):
-                target = min(float(out_times[i_out]), t + max(g[k] / -gd[k] for k in short))
-                continue
-            ks = [k for k in ks if g[k] <= EVENT_G_TOL or gd[k] < 0.0]
-            for k in ks:
-                switches_here[(t, k)] = switches_here.get((t, k), 0) + 1
-                if switches_here[(t, k)] > MAX_SWITCHES_AT_ONE_INSTANT:
-                    raise IntegrationError(f"contact {m.contact_numbers[k]} chatters at "
-                                           f"t = {t:.12g}")
-            if len(switches_here) > 256:
-                switches_here.clear()
-            self._switch(t, y, ks, events)
-            self._settle(t, y, events)
-            armed_out = self._g(y, self._closed)[0] <= 0.0
-            rhs = self._rhs_factory(self._closed.copy())
-            target, pending = float(out_times[i_out]), None
-            post_event = True
+            yield self._output(s, out_times[s.i_out])  # at an output time
+            if s.i_out == len(out_times):
+                break
+            s.target = float(out_times[s.i_out])
         self.stats["wall_time_s"] = _time.perf_counter() - wall0
+
+    def _start(self) -> _Loop:
+        """The initial state (the scene's impulse), settled: the state of frame 0."""
+        imp = self.scene.data["impulse"]
+        x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
+        self._closed = closed
+        self._d_hyst = 0.0
+        s = _Loop(t=0.0, y=np.concatenate([x, v, [0.0]]))
+        self._settle(s.t, s.y, s.events)
+        s.armed_out = self._g(s.y, self._closed)[0] <= 0.0
+        return s
+
+    def _resume(self, resume: dict) -> _Loop:
+        """The state of a checkpoint (:meth:`checkpoint_state`) of the frame ``i_out``."""
+        self._closed = np.array(resume["closed"], dtype=bool)
+        self._d_hyst = float(resume["d_hyst"])
+        return _Loop(t=float(resume["t"]), y=np.array(resume["y"], dtype=float),
+                     h_last=None if resume["h_last"] is None else float(resume["h_last"]),
+                     armed_out=np.array(resume["armed_out"], dtype=bool),
+                     post_event=bool(resume["post_event"]), i_out=int(resume["i_out"]))
+
+    def _output(self, s: _Loop, t_out) -> Frame:
+        """The frame ``s.i_out`` at output time ``t_out`` (the solver's own state): stores the
+        checkpoint, clears the events and moves ``i_out`` on to the next output time."""
+        self._snapshot = self._snap(s)
+        frame = self._frame(s.i_out, t_out, s.y, s.events)
+        s.events = []
+        s.i_out += 1
+        return frame
+
+    # ---- step 1: integrate to the next boundary (an output time or an event) -------------
+    def _integrate(self, s: _Loop) -> bool:
+        """One solver segment from ``(s.t, s.y)`` towards ``s.target``; True when it reached
+        the target.  Otherwise it stopped at an event inside a step (``s`` now restarts from
+        that step's start with the event as target and its contacts pending), at a step that
+        ended with a contact outside its state, or to tighten the tolerance before a
+        snap-off.  Contacts outside their state at the end are switched (:meth:`_settle`)."""
+        self.stats["segments"] += 1
+        solver, tight, g0, gd0 = self._open_solver(s)
+        restart, tighten = self._steps(s, solver, tight, g0, gd0)
+        self.stats["rhs_evals"] += solver.nfev
+        if restart is not None:
+            s.t, s.y, s.target, s.pending = restart
+            return False
+        s.t, s.y = solver.t, solver.y.copy()
+        s.h_last = getattr(solver, "h_abs", None) or solver.step_size or s.h_last
+        if self._settle(s.t, s.y, s.events):
+            self._rearm(s)
+        return not (tighten or s.t < s.target)
+
+    def _open_solver(self, s: _Loop):
+        """A DOP853 solver from ``(s.t, s.y)`` to ``s.target``; returns ``(solver, tight, g,
+        g')``.  Tighter tolerance (``EVENT_TIGHTEN``) for: the approach to an event (pending)
+        and steps predicted to reach a singular switching point, where the force has a sqrt or
+        delta^(3/2) singularity and a step's error estimate is weakest; and the steps up to
+        the next output time after a switch (measured: micro-star to t = 60, ledger error
+        1.4e-9 -> 7.6e-11 of E_imp for 0.4 % more steps)."""
+        g0, gd0 = self._g(s.y, self._closed)
+        tight = s.pending is not None or s.post_event or self._near_snap_off(g0, gd0, s.h_last)
+        s.post_event = False
+        tl = self.tol * EVENT_TIGHTEN if tight else self.tol
+        with np.errstate(all="ignore"):  # overflow: the checks in _step say it, one line
+            solver = DOP853(s.rhs, s.t, s.y, s.target, rtol=max(tl, RTOL_FLOOR), atol=tl,
+                            first_step=min(s.h_last, s.target - s.t) if s.h_last else None)
+        return solver, tight, g0, gd0
+
+    def _steps(self, s: _Loop, solver, tight: bool, g0, gd0):
+        """Step ``solver`` until it finishes or a step calls for a stop; returns ``(restart,
+        tighten)``: ``restart = (t0, y0, te, pending)`` when a step contains an event
+        (:meth:`_locate`), ``tighten`` when a not yet tight segment nears a snap-off.  A step
+        accepted with a contact outside its state (a root within ``SIMULTANEOUS`` of the step
+        end, or over its point) also stops it: :meth:`_integrate` switches it there."""
+        while solver.status == "running":
+            t0, y0 = solver.t, solver.y.copy()
+            y1 = self._step(s, solver)
+            g1, gd1 = self._g(y1, self._closed)
+            restart = self._locate(s, solver, t0, y0, g0, gd0, g1, gd1)
+            if restart is not None:
+                return restart, False
+            if np.any(self._outside(g1, gd1)):
+                break
+            g0, gd0 = g1, gd1
+            s.armed_out &= g1 <= 0.0
+            if not tight and self._near_snap_off(g1, gd1, solver.h_abs):
+                return None, True
+        return None, False
+
+    def _step(self, s: _Loop, solver):
+        """One solver step; returns the new state.  Raises :class:`IntegrationError` when the
+        solver fails, the state is not finite, or the watchdog (:meth:`_watch`) fires."""
+        t0 = solver.t
+        with np.errstate(all="ignore"):  # overflow: the checks below say it, one line
+            msg = solver.step()
+        if solver.status == "failed":
+            raise IntegrationError(f"integrator failed at t = {t0:.12g}: {msg}")
+        self.stats["steps"] += 1
+        t1, y1 = solver.t, solver.y
+        if not np.all(np.isfinite(y1)):
+            bad = int(np.flatnonzero(~np.isfinite(y1[:2 * self.n]))[0] % self.n) + 1
+            raise IntegrationError(f"non-finite state at t = {t1:.12g}, bead {bad}")
+        self._watch(s, t1 - t0, t1, y1)
+        return y1
+
+    def _watch(self, s: _Loop, step, t1, y1):
+        """The watchdog (module doc): every ``WATCH_STEPS`` steps, ``t`` must have advanced by
+        ``WATCH_STEPS * STEP_FLOOR * (1 + |t|)``, else :class:`IntegrationError`."""
+        s.watch_n += 1
+        if s.watch_n >= WATCH_STEPS:
+            if t1 - s.watch_t < WATCH_STEPS * STEP_FLOOR * (1.0 + abs(t1)):
+                raise IntegrationError(self._stalled(t1, y1, step, t1 - s.watch_t, s.rhs,
+                                                     s.pending))
+            s.watch_t, s.watch_n = t1, 0
+
+    # ---- step 2: locate an event inside an accepted step ---------------------------------
+    def _locate(self, s: _Loop, solver, t0, y0, g0, gd0, g1, gd1):
+        """The restart ``(t0, y0, te, {contact: was_closed})`` when the accepted step ``[t0,
+        t1]`` contains an event at ``te`` before its end (by more than ``SIMULTANEOUS``), the
+        contacts being those within ``SIMULTANEOUS`` of ``te``; else None.  Sets
+        ``s.h_last`` for the redone step up to the event."""
+        if not (np.any(g1 < 0.0) or np.any((gd0 < 0.0) & (gd1 > 0.0))):
+            return None
+        t1 = solver.t
+        cands = self._candidates(solver.dense_output(), t0, t1, g0, gd0, g1, gd1, s.armed_out)
+        if not cands:
+            return None
+        te = min(c[0] for c in cands)
+        if not te < t1 - SIMULTANEOUS * (1.0 + abs(t1)):
+            return None
+        ks = {k: bool(self._closed[k]) for tc, k in cands
+              if tc <= te + SIMULTANEOUS * (1.0 + abs(te))}
+        s.h_last = max(te - t0, 1e-3 * (solver.step_size or 1.0))
+        return t0, y0, te, ks
+
+    # ---- step 3: switch the pending contacts at the end of an event's approach -----------
+    def _arrive(self, s: _Loop, t_out):
+        """At the target of an event's approach: switch the pending contacts still in the
+        state they were located in (a settle on the way may have switched them already), then
+        settle, and aim at the output time ``t_out`` again; or, if they fall short of their
+        switching point, move the target on (:meth:`_short_of_point`)."""
+        ks = sorted(k for k, was_closed in s.pending.items() if self._closed[k] == was_closed)
+        if ks:
+            g, gd = self._g(s.y, self._closed)
+            if self._short_of_point(s, ks, g, gd, t_out):
+                return
+            ks = [k for k in ks if g[k] <= EVENT_G_TOL or gd[k] < 0.0]
+            self._chatter_guard(s.switches_here, s.t, ks, s.y)
+            if len(s.switches_here) > 256:
+                s.switches_here.clear()
+            self._switch(s.t, s.y, ks, s.events)
+            self._settle(s.t, s.y, s.events)
+            self._rearm(s)
+        s.target, s.pending = float(t_out), None
+
+    def _short_of_point(self, s: _Loop, ks, g, gd, t_out) -> bool:
+        """True (and ``s.target`` moved on by the largest ``g / |g'|``, at most to ``t_out``)
+        when pending contacts ``ks`` still approach their switching point from more than
+        ``EVENT_G_TOL`` away, and the time to reach it is above ``4 eps max(1, |t|)``."""
+        short = [k for k in ks if g[k] > EVENT_G_TOL and gd[k] < 0.0]
+        if not short:
+            return False
+        ahead = max(g[k] / -gd[k] for k in short)
+        if not ahead > 4e-16 * max(1.0, abs(s.t)):
+            return False
+        s.target = min(float(t_out), s.t + ahead)
+        return True
+
+    def _rearm(self, s: _Loop):
+        """After a switch: re-arm the further-out candidates (contacts on or over their point),
+        rebuild the right-hand side for the new contact states, tighten the next segment."""
+        s.armed_out = self._g(s.y, self._closed)[0] <= 0.0
+        s.rhs = self._rhs_factory(self._closed.copy())
+        s.post_event = True
 
     def _stalled(self, t, y, step, advance, rhs, pending) -> str:
         """The watchdog's one-line message: what collapsed, when, and where."""
@@ -409,10 +514,11 @@ class ReferenceBackend(Backend):
                 f"{advance:.3g} (last step {step:.3g}), below the floor {STEP_FLOOR:g} (1 + |t|)"
                 f" per step; {where}")
 
-    def _snap(self, t, y, h_last, armed_out, post_event, i_out) -> dict:
-        return {"t": float(t), "y": np.array(y), "closed": self._closed.copy(),
-                "d_hyst": self._d_hyst, "h_last": h_last, "armed_out": np.array(armed_out),
-                "post_event": bool(post_event), "i_out": int(i_out)}
+    def _snap(self, s: _Loop) -> dict:
+        """The checkpoint of the loop state ``s`` (keys and values stored by checkpoints)."""
+        return {"t": float(s.t), "y": np.array(s.y), "closed": self._closed.copy(),
+                "d_hyst": self._d_hyst, "h_last": s.h_last, "armed_out": np.array(s.armed_out),
+                "post_event": bool(s.post_event), "i_out": int(s.i_out)}
 
     def _frame(self, step, t, y, events):
         n = self.n
