@@ -41,7 +41,7 @@ import numpy as np
 
 from ..contact import ContactTable
 from ..scene import SceneError
-from . import fast_kernel as K
+from . import fast_kernel as fk
 from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
 EVENT_BUFFER = 65536
@@ -81,23 +81,23 @@ class FastBackend(Backend):
                       else ContactTable(law, int(table_points), delta_max))
         sigma, tm = law.sigma, law.t_min
         t0 = (4.0 * sigma) ** (1.0 / 3.0)
-        pr = np.zeros(K.N_PR)
-        pr[K.PR_GAP], pr[K.PR_C], pr[K.PR_K1], pr[K.PR_K3] = m.gap, m.damping, m.k1, m.k3
-        pr[K.PR_DOFF] = law.delta_off
-        pr[K.PR_BASE] = self.table.base
-        pr[K.PR_TSCALE] = self.table._scale
-        pr[K.PR_WLIM] = self.table.n - 1
-        pr[K.PR_DMAX] = self.table.delta_max
-        pr[K.PR_WSTEP] = self.table._h
+        pr = np.zeros(fk.N_PR)
+        pr[fk.PR_GAP], pr[fk.PR_C], pr[fk.PR_K1], pr[fk.PR_K3] = m.gap, m.damping, m.k1, m.k3
+        pr[fk.PR_DOFF] = law.delta_off
+        pr[fk.PR_BASE] = self.table.base
+        pr[fk.PR_TSCALE] = self.table._scale
+        pr[fk.PR_WLIM] = self.table.n - 1
+        pr[fk.PR_DMAX] = self.table.delta_max
+        pr[fk.PR_WSTEP] = self.table._h
         if law.kind == "schwarz":
-            pr[K.PR_FC], pr[K.PR_SIGMA], pr[K.PR_TMIN], pr[K.PR_DMIN] = (
+            pr[fk.PR_FC], pr[fk.PR_SIGMA], pr[fk.PR_TMIN], pr[fk.PR_DMIN] = (
                 law.fc, sigma, tm, law.delta_min)
-            pr[K.PR_E0] = float(law._antiderivative(t0))
+            pr[fk.PR_E0] = float(law._antiderivative(t0))
         singular = law.kind == "schwarz" and law.snap_off == "displacement" and tm > 0.0
-        pr[K.PR_SING] = law.delta_min + K.SING_BAND if singular else -math.inf
+        pr[fk.PR_SING] = law.delta_min + fk.SING_BAND if singular else -math.inf
         self.pr = pr
         self.tab = np.ascontiguousarray(self.table.f_coef, dtype=float)  # [n - 1, 4]
-        self.kernel = K.get_kernel(m.walls, m.damping != 0.0, m.k1 != 0.0, m.k3 != 0.0,
+        self.kernel = fk.get_kernel(m.walls, m.damping != 0.0, m.k1 != 0.0, m.k3 != 0.0,
                                    self.locate, contact_eval == "exact", law.kind == "hertz")
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
@@ -113,39 +113,39 @@ class FastBackend(Backend):
         self.V = np.zeros((2, n))
         self.A = np.zeros((2, n))
         self.closed = np.zeros(nc, dtype=np.bool_)
-        self.st = np.zeros(K.N_ST, dtype=np.int64)
-        self.sc = np.zeros(K.N_SC)
-        self.sc[K.SC_CHATT] = -1.0
-        self.flags = np.zeros(K.FLAG_CAP, dtype=np.int64)
-        self.swl = np.zeros(K.FLAG_CAP, dtype=np.int64)
+        self.st = np.zeros(fk.N_ST, dtype=np.int64)
+        self.sc = np.zeros(fk.N_SC)
+        self.sc[fk.SC_CHATT] = -1.0
+        self.flags = np.zeros(fk.FLAG_CAP, dtype=np.int64)
+        self.swl = np.zeros(fk.FLAG_CAP, dtype=np.int64)
         self.evt = np.zeros(EVENT_BUFFER)
         self.evj = np.zeros(EVENT_BUFFER, dtype=np.int64)
         self.evk = np.zeros(EVENT_BUFFER, dtype=np.int8)
-        self.chat = np.zeros((K.CHAT_CAP, 2), dtype=np.int64)
+        self.chat = np.zeros((fk.CHAT_CAP, 2), dtype=np.int64)
         self._pending: list = []
 
     def _take_events(self) -> list:
-        k = int(self.st[K.ST_EVN])
+        k = int(self.st[fk.ST_EVN])
         if k == 0:
             return []
         nums = self.model.contact_numbers
         order = np.argsort(self.evt[:k], kind="stable")  # quantized: per step, by contact
         evs = [Event(float(self.evt[i]), int(nums[self.evj[i]]),
                      CLOSE if self.evk[i] == 1 else OPEN) for i in order]
-        self.st[K.ST_EVN] = 0
+        self.st[fk.ST_EVN] = 0
         self.stats["events"] += k
         return evs
 
     def _check(self):
-        status = int(self.st[K.ST_STATUS])
-        if status in (K.OK, K.EVENTS_FULL):
-            self.st[K.ST_STATUS] = K.OK
+        status = int(self.st[fk.ST_STATUS])
+        if status in (fk.OK, fk.EVENTS_FULL):
+            self.st[fk.ST_STATUS] = fk.OK
             return
-        t = float(self.sc[K.SC_BADT])
-        j = int(self.st[K.ST_BAD])
+        t = float(self.sc[fk.SC_BADT])
+        j = int(self.st[fk.ST_BAD])
         num = int(self.model.contact_numbers[j]) if 0 <= j < self.model.n_contacts else j
-        c = self.X[int(self.st[K.ST_CUR])]
-        if status == K.OUT_OF_TABLE:
+        c = self.X[int(self.st[fk.ST_CUR])]
+        if status == fk.OUT_OF_TABLE:
             d = float(self.model.compressions(c)[j]) if 0 <= j < len(self.closed) else math.nan
             dmax = self.table.delta_max
             if not math.isfinite(d):
@@ -158,11 +158,11 @@ class FastBackend(Backend):
                     "larger table would resolve it")
             raise IntegrationError(f"compression {d:.4g} beyond the contact table (delta_max ="
                                    f" {dmax:g}) at t = {t:.12g}, contact {num}")
-        if status == K.CHATTER:
+        if status == fk.CHATTER:
             raise IntegrationError(f"contact {num} chatters at t = {t:.12g}: it switches state"
-                                   f" more than {K.MAX_SWITCHES} times at one instant")
-        if status == K.TOO_MANY_SUBSTEPS:
-            raise IntegrationError(f"more than {K.MAX_SUBSTEPS} events in one step at t = "
+                                   f" more than {fk.MAX_SWITCHES} times at one instant")
+        if status == fk.TOO_MANY_SUBSTEPS:
+            raise IntegrationError(f"more than {fk.MAX_SUBSTEPS} events in one step at t = "
                                    f"{t:.12g}, contact {num}")
         raise IntegrationError(f"more than {EVENT_BUFFER // 2} events in one step at "
                                f"t = {t:.12g}, contact {num}")
@@ -174,22 +174,22 @@ class FastBackend(Backend):
         return dict(self._snapshot)
 
     def _snap(self, i_out):
-        c = int(self.st[K.ST_CUR])
+        c = int(self.st[fk.ST_CUR])
         y = np.concatenate([self.X[c], self.V[c], self.A[c],
-                            [self.sc[K.SC_DVISC], self.sc[K.SC_POWER]]])
+                            [self.sc[fk.SC_DVISC], self.sc[fk.SC_POWER]]])
         self._snapshot = {"t": float(self._out_times[i_out]), "y": y,
-                          "closed": self.closed.copy(), "d_hyst": float(self.sc[K.SC_DHYST]),
+                          "closed": self.closed.copy(), "d_hyst": float(self.sc[fk.SC_DHYST]),
                           "i_out": int(i_out)}
 
     def _frame(self, i_out, t, events) -> Frame:
-        c = int(self.st[K.ST_CUR])
+        c = int(self.st[fk.ST_CUR])
         x, v = self.X[c].copy(), self.V[c].copy()
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
             bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0]) + 1
             raise IntegrationError(f"non-finite state at t = {t:.12g}, bead {bad}")
         return Frame(step=int(i_out), time=float(t), x=x, v=v, closed=self.closed.copy(),
-                     dissipated_viscous=float(self.sc[K.SC_DVISC]),
-                     dissipated_hysteresis=float(self.sc[K.SC_DHYST]), events=events)
+                     dissipated_viscous=float(self.sc[fk.SC_DVISC]),
+                     dissipated_hysteresis=float(self.sc[fk.SC_DHYST]), events=events)
 
     # ---- main loop ------------------------------------------------------------------------
     def frames(self, resume: dict | None = None):
@@ -204,9 +204,9 @@ class FastBackend(Backend):
             imp = self.scene.data["impulse"]
             x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
             self.X[0], self.V[0], self.closed[:] = x, v, closed
-            K.settle_all(cfg, 0.0, self.X[0], self.V[0], self.A[0], *args(), self.st, self.sc,
+            fk.settle_all(cfg, 0.0, self.X[0], self.V[0], self.A[0], *args(), self.st, self.sc,
                        self.evt, self.evj, self.evk, self.chat)
-            self.sc[K.SC_POWER] = K.init_acc(cfg, self.X[0], self.V[0], self.A[0],
+            self.sc[fk.SC_POWER] = fk.init_acc(cfg, self.X[0], self.V[0], self.A[0],
                                               *args(), self.st)
             self._check()
             i_out = 0
@@ -215,27 +215,27 @@ class FastBackend(Backend):
         else:
             y = np.asarray(resume["y"], dtype=float)
             self.X[0], self.V[0], self.A[0] = y[:n], y[n:2 * n], y[2 * n:3 * n]
-            self.sc[K.SC_DVISC], self.sc[K.SC_POWER] = y[3 * n], y[3 * n + 1]
-            self.sc[K.SC_DHYST] = float(resume["d_hyst"])
+            self.sc[fk.SC_DVISC], self.sc[fk.SC_POWER] = y[3 * n], y[3 * n + 1]
+            self.sc[fk.SC_DHYST] = float(resume["d_hyst"])
             self.closed[:] = np.asarray(resume["closed"], dtype=bool)
             i_out = int(resume["i_out"])
-            self.st[K.ST_STEP] = i_out * self.steps_per_frame
+            self.st[fk.ST_STEP] = i_out * self.steps_per_frame
         try:
             for i in range(i_out + 1, len(out_times)):
                 target = i * self.steps_per_frame
                 k0 = _time.perf_counter()
-                while self.st[K.ST_STEP] < target:
-                    advance(int(target - self.st[K.ST_STEP]), self.dt, self.X, self.V, self.A,
+                while self.st[fk.ST_STEP] < target:
+                    advance(int(target - self.st[fk.ST_STEP]), self.dt, self.X, self.V, self.A,
                             *args(), self.flags, self.swl, self.st, self.sc, self.evt,
                             self.evj, self.evk, self.chat)
-                    if self.st[K.ST_STATUS] == K.EVENTS_FULL:
+                    if self.st[fk.ST_STATUS] == fk.EVENTS_FULL:
                         self._pending += self._take_events()
                     self._check()
                 self.stats["kernel_s"] += _time.perf_counter() - k0
                 events = self._pending + self._take_events()
                 self._pending = []
-                self.stats["steps"] = int(self.st[K.ST_STEP])
-                self.stats["event_substeps"] = int(self.st[K.ST_SUBSTEPS])
+                self.stats["steps"] = int(self.st[fk.ST_STEP])
+                self.stats["event_substeps"] = int(self.st[fk.ST_SUBSTEPS])
                 frame = self._frame(i, out_times[i], events)
                 self._snap(i)
                 yield frame

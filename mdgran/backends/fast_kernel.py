@@ -207,7 +207,7 @@ def quantized_switch(cfg, j, d, xo, h, t0, closed, pr, st, sc, evt, evj, evk):
 
 
 @njit(inline="always")
-def sweep(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, sc, evt, evj, evk):
+def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, sc, evt, evj, evk):
     """One Verlet step of length h from (xo, vo, ao) into (xn, vn, an); returns the damping
     power at the end (rates from v_est).
 
@@ -537,7 +537,7 @@ def _advance(cfg, nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt,
             o = st[ST_CUR]
             w = 1 - o
             st[ST_NFLAG] = 0
-            p1 = sweep(cfg, X[o], V[o], A[o], X[w], V[w], A[w], closed, h, t0 + done, pr, tab,
+            p1 = verlet_pass(cfg, X[o], V[o], A[o], X[w], V[w], A[w], closed, h, t0 + done, pr, tab,
                        flags, st, sc, evt, evj, evk)
             if st[ST_STATUS] != OK:
                 sc[SC_BADT] = t0 + done + h
