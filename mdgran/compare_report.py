@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .compare import SAFETY
-
 
 def _atomic_write(path: Path, text: str):
     tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
@@ -91,8 +89,9 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
         tt = t[: len(d)]
         ax.semilogy(tt, np.maximum(d, 1e-18), color=f"C{i}", lw=1.5,
                     label=f"{r.name} - {ref.name}")
-        ax.semilogy(tt, SAFETY * (r.error[: len(d)] + ref.error[: len(d)]), ":",
-                    color=f"C{i}", label=f"allowed for {r.name}: {SAFETY:g} x (own errors)")
+        safety = report["thresholds"]["safety"]
+        ax.semilogy(tt, safety * (r.error[: len(d)] + ref.error[: len(d)]), ":",
+                    color=f"C{i}", label=f"allowed for {r.name}: {safety:g} x (own errors)")
         # black for every pair (never a backend's colour); with several pairs, one style each
         hstyle = {**HORIZON_STYLE, "ls": ["-.", (0, (6, 2)), (0, (1, 1)), "-"][(i - 1) % 4]}
         ax.axvline(report["pairs"][r.name]["horizon"], **hstyle,
@@ -250,7 +249,8 @@ def _markdown(scene, runs, report) -> str:
         "How to read: each backend's own error estimate is the difference between its nominal "
         "run and a refined run (1/100 of the tolerance for the reference; half the time step "
         "for fixed-step backends, scaled by Richardson's factor). The backends agree when their "
-        f"difference stays below {SAFETY:g} times the sum of those estimates.",
+        f"difference stays below {report['thresholds']['safety']:g} times the sum of those "
+        "estimates.",
     ]
     return "\n".join(lines) + "\n"
 

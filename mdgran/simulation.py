@@ -168,7 +168,7 @@ def check_resources(scene, out=None, keep: bool = True):
 
 def make_backend(scene, backend: str, **options):
     if backend not in BACKENDS:
-        raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
+        raise SceneError("backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
     try:
         return get_backend(backend)(scene, **options)
     except ImportError as exc:

@@ -179,8 +179,11 @@ def _fake_comparison(traj, scene, names=("reference", "fast")):
     lives = cluster_lives(trajectory_history(traj, scene))
     horizon = 0.5 * float(traj.time[-1])
     pred = {"time": traj.time, "difference": np.geomspace(1e-14, 1e-2, len(traj.time))}
+    from mdgran.compare import PREDICTABLE, SAFETY
+
     report = {"pairs": {n: {"horizon": horizon, "clusters": {"lifetimes": {"pvalue": 0.5}}}
-                        for n in names[1:]}}
+                        for n in names[1:]},
+              "thresholds": {"predictable_p": PREDICTABLE, "safety": SAFETY}}
     pairs = {n: {"clusters": {"lives": {names[0]: lives, n: lives}, "where": "over the run"}}
              for n in names[1:]}
     return runs, pred, report, pairs
