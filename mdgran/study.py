@@ -12,6 +12,14 @@ What it does, reusing whatever ``DIR`` already holds (so a second call only redr
    its "Run status" section names every run and sweep case that is not complete (its ledger
    error exceeded its backend's declared bound, or it failed): their numbers are in the
    figures and tables but are not to be trusted.
+
+**Realizations.**  A sweep run with ``[sweep] realizations = K`` (:mod:`mdgran.sweep`) holds K
+realizations of each grid point.  The figures and sections pool them all; report.md's
+"Realizations" section gives every statistic of the study (Fig. 7 slope after the impact
+transient, pooled coincidence fraction and its z at T_c / 4 in the active part, the z of each
+null model of :func:`null_models`, with smaller shuffle counts) computed on each realization
+alone, their mean and the 95% Student-t interval of that mean (:func:`interval_over_realizations`),
+next to the pooled value (:func:`realization_statistics`).  With one realization it says so.
 """
 from __future__ import annotations
 
@@ -254,8 +262,22 @@ def make_report(out, small: bool = False, workers: int | None = None,
                                           "literal rule (any segment but the last)")
         say("null models of Fig. 7 and of the coincidence test")
         numbers["nulls"] = null_models(cases, small)
+        spec = json.loads((sdir / "sweep.json").read_text())
         numbers["sweep"] = {"cases": len(cases), "dir": str(sdir),
-                            "max_ledger_error": max(c["ledger_error"] for c in cases)}
+                            "max_ledger_error": max(c["ledger_error"] for c in cases),
+                            "realizations": int(spec.get("realizations", 1))}
+        groups = realization_groups(cases)
+        if len(groups) > 1:
+            say(f"the study's statistics on each of {len(groups)} realizations")
+            rz = realization_statistics(cases, small, pooled_statistics(numbers))
+        else:
+            rz = {"K": 1, "realizations": list(groups), "interval": None, "statistics": {}}
+        rz["perturbation"] = spec.get("perturbation")
+        if rz["K"] > 1:
+            rz["shuffles"] = (f"{REALIZATION_SHIFTS[bool(small)]} circular shifts for the "
+                              "coincidence test, {} and {} shuffles for the null models".format(
+                                  *REALIZATION_SHUFFLES[bool(small)]))
+        numbers["realizations"] = rz
     numbers["beyond"] = {}
     for name in beyond:
         bdir = out / "beyond" / name
@@ -379,18 +401,19 @@ def pooled_coincidence(cases, window_frac: float = 1.0, prominence: float = 0.1,
             "p_value": float((1 + np.sum(null >= obs)) / (1 + n_shifts))}
 
 
-def null_models(cases: list, small: bool = False) -> dict:
+def null_models(cases: list, small: bool = False, shuffles: tuple | None = None) -> dict:
     """Fig. 7's slope and the pooled coincidence beside their null models
     (:mod:`mdgran.analysis.nulls`): the slope against (a) C_eff shifted in time against the
     segments, (b) another case's C_eff, (c) a random late segment instead of the largest-C_eff
     one; two selection-free measures (all segments weighted by length, within each case; the
     Spearman correlation of rate and C_eff over each case's active window) against the time
     shift; the coincidence at T_c / 4 for C_eff from all dissipation, viscous only and
-    hysteresis only."""
+    hysteresis only.  ``shuffles``: ``(K, K_long)`` shuffle counts instead of the defaults
+    (100, 1000 small; 300, 10000), as :func:`realization_statistics` uses per realization."""
     from .analysis import nulls
 
     nc = [c["null_case"] for c in cases]
-    k, k_long = (100, 1000) if small else (300, 10000)
+    k, k_long = shuffles or ((100, 1000) if small else (300, 10000))
     obs = an.fig7_slope(nc)
     out = {"fig7_slope": obs, "fig7": {
         "C_eff shifted in time": an.null_summary(obs, an.time_shift(nc, n_shuffles=k, rng=0)),
@@ -466,6 +489,156 @@ def null_verdicts(nm: dict) -> list:
                      "clusters" + ("; the viscous part coincides too" if z(v) >= 3 else
                                    "; the viscous part barely coincides")))
     return rows
+
+
+# ---- realizations ---------------------------------------------------------------------------
+#: shuffle counts ``(K, K_long)`` of :func:`null_models` per realization (small, full study)
+REALIZATION_SHUFFLES = {True: (30, 200), False: (100, 1000)}
+#: circular shifts of the pooled coincidence test per realization (small, full study)
+REALIZATION_SHIFTS = {True: 200, False: 500}
+#: how report.md and report.json describe the interval (:func:`interval_over_realizations`)
+INTERVAL = ("95% Student-t interval of the mean over the K realizations: mean +- "
+            "t(0.975, K-1) sd / sqrt(K), sd the sample standard deviation (ddof 1)")
+
+
+def interval_over_realizations(values, level: float = 0.95) -> dict:
+    """Mean of a statistic over realizations and the Student-t interval of that mean:
+    ``mean +- t((1 + level) / 2, n - 1) * sd / sqrt(n)``, ``sd`` with ``ddof = 1``, over the
+    ``n`` finite values of ``values`` (a realization where the statistic is undefined, NaN, is
+    left out and counted in ``K - n``).  Identical values give ``sd = 0`` and a zero-width
+    interval exactly.  With fewer than 2 finite values there is no interval (``sd``,
+    ``half_width`` and ``interval`` None).  Also ``min`` and ``max`` (the spread of single
+    realizations, which the interval of the mean is not)."""
+    from scipy import stats
+
+    v = np.asarray(values, float).ravel()
+    fin = v[np.isfinite(v)]
+    n = int(len(fin))
+    out = {"K": int(len(v)), "n": n, "level": level,
+           "mean": float(fin.mean()) if n else float("nan"),
+           "min": float(fin.min()) if n else float("nan"),
+           "max": float(fin.max()) if n else float("nan"),
+           "sd": None, "half_width": None, "interval": None}
+    if n >= 2:
+        if np.all(fin == fin[0]):
+            mean, sd = float(fin[0]), 0.0
+        else:
+            mean, sd = float(fin.mean()), float(np.std(fin, ddof=1))
+        half = float(stats.t.ppf(0.5 + level / 2, n - 1) * sd / math.sqrt(n))
+        out.update(mean=mean, sd=sd, half_width=half, interval=[mean - half, mean + half])
+    return out
+
+
+def realization_groups(cases: list) -> dict:
+    """Sweep cases by realization (``params["realization"]``, 0 where absent), in order."""
+    groups: dict = {}
+    for c in cases:
+        groups.setdefault(int(c["params"].get("realization", 0)), []).append(c)
+    return dict(sorted(groups.items()))
+
+
+def late_fig7_fit(cases: list) -> dict:
+    """Fig. 7 after the impact transient without drawing it: the fit of
+    :func:`mdgran.paper_figures.fit_slope` on each case's representative segment starting at
+    ``t >= T_c / 2`` (what ``numbers["fig7"]`` holds)."""
+    rows = [c for c in cases if c.get("c_eff_late_segment") is not None
+            and (c.get("c_eff_late_segment_rate") or 0) > 0]
+    return pf.fit_slope(np.log10([c["c_eff_late_segment_rate"] for c in rows]),
+                        [c["c_eff_late_segment"] for c in rows])
+
+
+def _z(r: dict) -> float:
+    if not r or not r.get("cases", 1) or not r.get("null_std"):
+        return float("nan")
+    return float((r["fraction"] - r["null_mean"]) / r["null_std"])
+
+
+def study_statistics(fig7_fit: dict, coincidence: dict, nulls: dict | None = None) -> dict:
+    """The study's statistics as ``{name: value}`` (NaN where undefined): the Fig. 7 slope after
+    the impact transient (:func:`late_fig7_fit`), the pooled coincidence fraction and its z at
+    T_c / 4 in the active part (:func:`pooled_coincidence`), and, given :func:`null_models`,
+    the z of each of its nulls."""
+    nan = float("nan")
+    out = {"Fig. 7 slope (after the impact transient)": float(fig7_fit.get("slope", nan)),
+           "pooled coincidence fraction (T_c/4, active part)":
+               float(coincidence.get("fraction", nan)) if coincidence.get("cases") else nan,
+           "pooled coincidence z (T_c/4, active part)": _z(coincidence)}
+    if nulls:
+        for name, r in nulls["fig7"].items():
+            out[f"null z: Fig. 7 slope against {name}"] = float(r["z"])
+        for name, r in nulls["selection_free"].items():
+            out[f"null z: {name}"] = float(r["z"])
+        for ch, r in nulls["coincidence_by_channel"]["active part"].items():
+            out[f"null z: coincidence (T_c/4, active part), C_eff from {ch}"] = _z(r)
+    return out
+
+
+def pooled_statistics(numbers: dict) -> dict:
+    """:func:`study_statistics` of the report's numbers (every case, all realizations pooled)."""
+    co = next((r for r in numbers.get("coincidence_pooled", [])
+               if r.get("range") == "active part" and r.get("window_T_c") == 0.25), {})
+    return study_statistics(numbers.get("fig7", {}), co, numbers.get("nulls"))
+
+
+def realization_statistics(cases: list, small: bool = False, pooled: dict | None = None,
+                           nulls: bool = True, n_shifts: int | None = None,
+                           shuffles: tuple | None = None) -> dict:
+    """Every statistic of :func:`study_statistics` computed on each realization's cases alone
+    (:func:`realization_groups`), with small shuffle counts (:data:`REALIZATION_SHIFTS`,
+    :data:`REALIZATION_SHUFFLES`, or ``n_shifts``, ``shuffles``); ``nulls=False`` leaves out the
+    null models.  Returns ``{"K", "realizations", "interval", "statistics": {name: {"values"
+    [K], "pooled" (from ``pooled``, the all-realization value, or None), and
+    :func:`interval_over_realizations`}}}``."""
+    groups = realization_groups(cases)
+    n_shifts = n_shifts or REALIZATION_SHIFTS[bool(small)]
+    shuffles = shuffles or REALIZATION_SHUFFLES[bool(small)]
+    per = []
+    for group in groups.values():
+        co = pooled_coincidence(group, 0.25, n_shifts=n_shifts, active=True)
+        nm = null_models(group, small, shuffles) if nulls else None
+        per.append(study_statistics(late_fig7_fit(group), co, nm))
+    names = list(dict.fromkeys(k for p in per for k in p))
+    pooled = pooled or {}
+    stats = {}
+    for name in names:
+        values = [p.get(name, float("nan")) for p in per]
+        stats[name] = {"values": values, "pooled": pooled.get(name),
+                       **interval_over_realizations(values)}
+    return {"K": len(groups), "realizations": list(groups), "interval": INTERVAL,
+            "statistics": stats}
+
+
+def realizations_markdown(rz: dict) -> list:
+    """report.md's "Realizations" section (:func:`realization_statistics`)."""
+    L = ["## Realizations", ""]
+    if rz["K"] < 2:
+        return L + ["One realization per grid point: every statistic above is that of one "
+                    "realization of a chaotic system, with no interval over realizations. "
+                    "(`realizations = K` in the sweep's `[sweep]` table runs K, each with the "
+                    "impulse velocity perturbed: `mdgran/sweep.py`.)", ""]
+    eps = rz.get("perturbation")
+    L += [f"{rz['K']} realizations of each grid point"
+          + (f", realization r with the impulse velocity v0 (1 + r x {eps:g})" if eps else "")
+          + ": past the predictability horizon each is one realization of a chaotic system. "
+          "Each statistic computed on each realization's cases alone (shuffle counts per "
+          f"realization: {rz.get('shuffles', '')}), its mean and the {INTERVAL}; "
+          "min to max is the spread of single realizations. 'Pooled' is the value over every "
+          "case of every realization (the numbers in the sections above): realizations of one "
+          "grid point share their early, predictable part, so the pooled Fig. 7 interval is "
+          "too narrow and the 'another case's C_eff' null may swap a case with its own "
+          "realization.", "",
+          "| statistic | pooled (all realizations) | mean over realizations | 95% interval "
+          "of the mean | sd | min to max | per realization |",
+          "|---|---|---|---|---|---|---|"]
+    for name, s in rz["statistics"].items():
+        ci = (f"{s['interval'][0]:.3g} to {s['interval'][1]:.3g}" if s["interval"] else
+              "- (fewer than 2 defined)")
+        each = ", ".join(_fmt(v) if np.isfinite(v) else "-" for v in s["values"])
+        pooled = s["pooled"]
+        L.append(f"| {name} | {_fmt(pooled) if pooled is not None and np.isfinite(pooled) else '-'}"
+                 f" | {_fmt(s['mean'])} | {ci} | {_fmt(s['sd'])} | {_fmt(s['min'])} to "
+                 f"{_fmt(s['max'])} | {each} |")
+    return L + [""]
 
 
 def smoothing_sensitivity(traj, scene) -> list:
@@ -593,6 +766,8 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
                          f"(p = {f['spearman_p']:.2g}), n = {f['n']}.")
             else:
                 L.append(f"* {label}: too few cases for a fit (n = {f['n']}).")
+        if "realizations" in nb:
+            L += [""] + realizations_markdown(nb["realizations"])
     if nb.get("beyond"):
         L += ["", "## Beyond the paper", "",
               "The same measures on longer chains and over the adhesion parameter lambda "

@@ -18,6 +18,30 @@ A sweep file (TOML; built-in ones in ``mdgran/sweeps/``)::
     "impulse.velocity" = [4.0]
     "run.duration" = 50.0
 
+**Realizations.**  Past its predictability horizon a case is one realization of a chaotic
+system, and statistics over the sweep depend on which.  ``[sweep]`` may ask for an ensemble::
+
+    [sweep]
+    realizations = 5              # K >= 1 (default 1: one case per grid point, as without it)
+    perturbation = 1e-3           # eps > 0, at most 0.1 (default 1e-3)
+
+Realization ``r`` (``0 .. K-1``) of a grid point runs it with the impulse velocity
+``v0 * (1 + r * eps)``, ``v0`` the grid point's own ``impulse.velocity`` (from the grid, the
+fixed keys or the scene file; an ``impulse.velocity_si`` converted to p q first): ``r = 0`` is the
+unperturbed case, with exactly the overrides it has without realizations; ``r >= 1`` appends
+the override ``("impulse.velocity", v0 * (1 + r * eps))`` (replacing the grid point's
+``impulse.velocity`` or ``impulse.velocity_si`` override).  A relative change of ``1e-3`` is far
+below any structure of the grid and far above round-off, so the realizations diverge only
+where the dynamics amplifies it (the impulse energy changes by the factor ``(1 + r eps)^2``,
+0.2% per realization at ``1e-3``).  Each realization is a case of its own (``NNNN.h5``,
+``NNNN.json``); with ``K > 1`` every case's ``params`` gain ``"realization": r`` (its other
+``params`` are the grid point's, unperturbed).  Realizations are the slowest axis: case
+``r * G + g`` is realization ``r`` of grid point ``g`` (``G`` grid points), so cases
+``0 .. G-1`` are the sweep without realizations, numbered as before: a folder run with ``K``
+realizations can be run again with more (same ``eps``) and only the new cases run.  The
+``[small]`` section may set ``realizations`` and ``perturbation`` too (they replace the
+``[sweep]`` values there).
+
 Every case writes ``DIR/cases/NNNN.h5`` (the run, atomically) and then ``DIR/cases/NNNN.json``
 (its summary, atomically).  A case counts as done when its JSON exists (and its H5, unless it
 failed), so a sweep that is killed or interrupted and started again redoes only the unfinished
@@ -55,6 +79,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import sys
 import time as _time
@@ -70,9 +95,45 @@ def builtin_sweeps() -> dict:
     return {p.stem: p for p in sorted(SWEEP_DIR.glob("*.toml"))}
 
 
-def load_sweep(spec: str, extra_overrides=(), small: bool = False) -> dict:
+#: default relative change of impulse.velocity between successive realizations
+PERTURBATION = 1e-3
+#: the largest perturbation allowed: realizations are the same grid point, perturbed
+MAX_PERTURBATION = 0.1
+
+
+def _realization_keys(head: dict, small_t: dict, small: bool, realizations=None):
+    """``(K, eps)`` from ``[sweep]`` (``[small]`` replacing them with ``small``; the
+    ``realizations`` argument replacing K), checked: one-line SceneError naming the key."""
+    keys = dict(head)
+    if small:
+        keys.update({k: v for k, v in small_t.items() if k in ("realizations", "perturbation")})
+    sec = {k: ("small" if small and k in small_t else "sweep")
+           for k in ("realizations", "perturbation")}
+    k = keys.get("realizations", 1) if realizations is None else realizations
+    where = f"{sec['realizations']}.realizations" if realizations is None else "realizations"
+    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+        raise SceneError(where, f"must be an integer >= 1, not {k!r}"[:200])
+    eps = keys.get("perturbation", PERTURBATION)
+    if (isinstance(eps, bool) or not isinstance(eps, (int, float)) or not math.isfinite(eps)
+            or not 0 < eps <= MAX_PERTURBATION):
+        raise SceneError(f"{sec['perturbation']}.perturbation", "must be a number > 0 and <= "
+                         f"{MAX_PERTURBATION:g} (relative change of impulse.velocity per "
+                         f"realization), not {eps!r}"[:200])
+    return k, float(eps)
+
+
+def perturbed_velocity(v0: float, r: int, eps: float) -> float:
+    """The impulse velocity of realization ``r``: ``v0 * (1 + r * eps)``."""
+    return float(v0) * (1.0 + r * eps)
+
+
+def load_sweep(spec: str, extra_overrides=(), small: bool = False,
+               realizations: int | None = None) -> dict:
     """Read and check a sweep; returns ``{"name", "scene", "backend", "cases": [...]}`` where
-    each case is ``{"index", "overrides": [[key, value], ...], "params": {key: value}}``."""
+    each case is ``{"index", "overrides": [[key, value], ...], "params": {key: value}}``.
+    ``realizations`` replaces the file's ``[sweep] realizations`` (module doc: case ``r * G +
+    g`` is realization ``r`` of grid point ``g``; with more than one, ``params`` hold
+    ``"realization"``, and the returned dict ``realizations`` and ``perturbation``)."""
     sweeps = builtin_sweeps()
     path = sweeps.get(spec, Path(spec))
     try:
@@ -97,8 +158,11 @@ def load_sweep(spec: str, extra_overrides=(), small: bool = False) -> dict:
     backend = head.get("backend", "reference")
     fixed_t = dict(raw.get("fixed", {}))
     grid = dict(raw.get("grid", {}))
+    n_real, eps = _realization_keys(head, raw.get("small", {}), small, realizations)
     if small:  # the CI-sized version: [small] replaces grid axes (lists) and fixed keys
         for k, v in raw.get("small", {}).items():
+            if k in ("realizations", "perturbation"):
+                continue
             (grid if isinstance(v, list) else fixed_t)[k] = v
     fixed = list(fixed_t.items()) + list(extra_overrides)
     if not grid or not all(isinstance(v, list) and v for v in grid.values()):
@@ -109,9 +173,35 @@ def load_sweep(spec: str, extra_overrides=(), small: bool = False) -> dict:
         overrides = fixed + list(params.items())
         load_scene(scene, overrides)  # validate every case up front
         cases.append({"index": i, "overrides": overrides, "params": params})
-    return {"name": path.stem, "scene": scene, "backend": backend, "cases": cases,
-            "description": head.get("description", ""), "axes": list(grid.keys()),
-            "small": raw.get("small", {})}
+    out = {"name": path.stem, "scene": scene, "backend": backend, "cases": cases,
+           "description": head.get("description", ""), "axes": list(grid.keys()),
+           "small": raw.get("small", {})}
+    if n_real > 1:
+        out["cases"] = _realization_cases(scene, cases, n_real, eps)
+        out["realizations"], out["perturbation"] = n_real, eps
+    return out
+
+
+def _realization_cases(scene: str, grid_cases: list, n_real: int, eps: float) -> list:
+    """The cases of ``n_real`` realizations of each grid case, realization the slowest axis."""
+    vel = ("impulse.velocity", "impulse.velocity_si")
+    base = [float(load_scene(scene, c["overrides"]).data["impulse"]["velocity"])
+            for c in grid_cases]
+    cases = []
+    for r in range(n_real):
+        for c, v0 in zip(grid_cases, base):
+            overrides = list(c["overrides"])
+            if r:
+                overrides = [o for o in overrides if o[0] not in vel]
+                overrides.append(("impulse.velocity", perturbed_velocity(v0, r, eps)))
+                try:
+                    load_scene(scene, overrides)
+                except SceneError as exc:
+                    raise SceneError("sweep.perturbation", f"realization {r} of case "
+                                     f"{c['index']:04d}: {exc}") from None
+            cases.append({"index": len(cases), "overrides": overrides,
+                          "params": {**c["params"], "realization": r}})
+    return cases
 
 
 def _atomic_json(path: Path, obj):
@@ -428,6 +518,27 @@ def _finished(out_dir: Path, index: int) -> bool:
         return False
 
 
+def _extends(before, cases: list) -> bool:
+    """Whether a folder's recorded cases ``before`` are ``cases`` or the first of them with
+    fewer realizations (realization 0 recorded without its ``"realization"`` key when the
+    folder had one realization)."""
+    if not isinstance(before, list) or len(before) > len(cases):
+        return False
+    if before == cases:
+        return True
+    if len(before) == len(cases) or "realization" not in cases[0]["params"]:
+        return False
+
+    def plain(c):
+        if not isinstance(c, dict) or not isinstance(c.get("params"), dict):
+            return c
+        params = {k: v for k, v in c["params"].items()
+                  if not (k == "realization" and v == 0)}
+        return {**c, "params": params}
+
+    return [plain(c) for c in before] == [plain(c) for c in cases[:len(before)]]
+
+
 def pending_cases(sweep: dict, out_dir: Path) -> list:
     return [c for c in sweep["cases"] if not _finished(Path(out_dir), c["index"])]
 
@@ -446,10 +557,12 @@ def _mpi_executor(workers: int):
 def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
               overrides=(), progress=True, stream=None, small: bool = False,
               backend: str | None = None, case_fn=None,
-              progress_interval: float | None = None) -> list:
+              progress_interval: float | None = None, realizations: int | None = None) -> list:
     """Run every unfinished case of ``spec``; returns all case summaries (finished ones read
     back from disk), sorted by case index.  ``backend`` replaces the spec's backend; a folder
-    holds one sweep on one backend, so resuming it on another is refused.
+    holds one sweep on one backend, so resuming it on another is refused.  ``realizations``
+    replaces the file's ``[sweep] realizations`` (module doc); a folder holding the same sweep
+    with fewer realizations (its cases a prefix of these) is extended: only the new cases run.
 
     A case that fails for any reason (an exception, its worker process dying twice) is
     recorded as failed, with a one-line reason, in its JSON and in ``summary.json``, and the
@@ -474,7 +587,7 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                          "ranks as mpiexec -n K python -m mpi4py.futures "
                          '"$(command -v mdgran)" sweep ... --executor mpi')
     stream = stream or sys.stderr
-    sweep = load_sweep(spec, overrides, small)
+    sweep = load_sweep(spec, overrides, small, realizations)
     if backend is not None:
         if backend not in BACKENDS:
             raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not "
@@ -489,8 +602,8 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
         except (ValueError, UnicodeDecodeError, RecursionError) as exc:
             raise SceneError("--out", f"{out}/sweep.json is not a sweep's record ({exc}); use "
                              "a new folder or remove it") from None
-        if before.get("backend") != sweep["backend"] or before.get("cases") != json.loads(
-                json.dumps(sweep["cases"])):
+        if before.get("backend") != sweep["backend"] or not _extends(
+                before.get("cases"), json.loads(json.dumps(sweep["cases"]))):
             raise SceneError("--out", f"{out} holds another sweep (or the same on backend "
                              f"{before.get('backend')!r}); use a new folder")
     pool = _mpi_executor(workers) if executor == "mpi" and pending_cases(sweep, out) else None
@@ -549,7 +662,11 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                     stale.unlink(missing_ok=True)
     elif pool is not None:
         pool.shutdown()
-    results = [json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
-               for c in sweep["cases"]]
+    results = []
+    for c in sweep["cases"]:
+        rec = json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
+        if "realization" in c["params"]:  # a case run before realizations were asked for
+            rec["params"] = c["params"]
+        results.append(rec)
     _atomic_json(out / "summary.json", sweep_summary(results))
     return results
