@@ -363,42 +363,9 @@ def pooled_coincidence(cases, window_frac: float = 1.0, prominence: float = 0.1,
     has only 3-4 rate peaks; pooling gives the test its power.  ``active``: test only inside
     each case's active part, from the start to one T_c after its last re-clustering event, so
     that both kinds of peak crowding into the early, active part is not counted as alignment."""
-    rng = np.random.default_rng(seed)
-    per_case = []
-    for c in cases:
-        time, cbar, rate = c["curves"]
-        tc = c.get("characteristic_period")
-        if tc is None or not np.isfinite(tc):
-            continue
-        t0, t1 = float(time[0]), float(time[-1])
-        if active:
-            last = c.get("last_reclustering_time")
-            if last is None:
-                continue
-            t1 = min(t1, last + tc)
-        a = an.peak_times(time, cbar, prominence, (t0, t1))
-        b = an.peak_times(time, rate, prominence, (t0, t1))
-        if len(a) and len(b):
-            per_case.append((a, b, window_frac * tc, t0, t1))
-
-    def hits(shift):
-        total = 0
-        for (a, b, w, t0, t1), s in zip(per_case, shift):
-            bb = t0 + (b - t0 + s * (t1 - t0)) % (t1 - t0)
-            total += int(np.sum(np.min(np.abs(a[:, None] - bb[None, :]), axis=1) <= w))
-        return total
-
-    n_a = sum(len(p[0]) for p in per_case)
-    if not n_a:
-        return {"cases": 0}
-    obs = hits(np.zeros(len(per_case))) / n_a
-    null = np.array([hits(rng.uniform(size=len(per_case))) / n_a for _ in range(n_shifts)])
-    return {"cases": len(per_case), "c_eff_peaks": n_a,
-            "rate_peaks": sum(len(p[1]) for p in per_case), "window_T_c": window_frac,
-            "prominence": prominence, "range": "active part" if active else "whole run",
-            "fraction": obs, "null_mean": float(null.mean()),
-            "null_std": float(null.std()),
-            "p_value": float((1 + np.sum(null >= obs)) / (1 + n_shifts))}
+    total_only = [{k: v for k, v in c.items() if k != "channels"} for c in cases]
+    return an.pooled_channel_coincidence(total_only, window_frac, prominence, active, n_shifts,
+                                         seed).get("total", {"cases": 0})
 
 
 def null_models(cases: list, small: bool = False, shuffles: tuple | None = None) -> dict:

@@ -10,6 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import InterruptAt
+
 from mdgran.chain import model_from_scene
 from mdgran.reporters import H5MDWriter
 from mdgran.scene import load_scene
@@ -18,20 +20,6 @@ from mdgran.trajectory import read_h5
 
 T_END, T_STOP = 40.0, 30.0  # micro-star: 14 events by t = 40 (snap-offs and a re-closure)
 SERIES = ("compression", "force", "closed")
-
-
-class _StopAt:
-    """Ctrl-C at the first frame at or after ``at`` (as tests/test_faults.py's ``partial``)."""
-
-    def __init__(self, at):
-        self.at = at
-
-    def report(self, frame, ledger):
-        if frame.time >= self.at:
-            raise KeyboardInterrupt
-
-    def close(self, status):
-        pass
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +31,7 @@ def runs(tmp_path_factory):
     whole = d / "whole.h5"
     res = run(sc, "reference", out=whole)
     with pytest.raises(KeyboardInterrupt):
-        run(sc, "reference", out=d / "r.h5", checkpoint_every=0.0, reporters=[_StopAt(T_STOP)])
+        run(sc, "reference", out=d / "r.h5", checkpoint_every=0.0, reporters=[InterruptAt(T_STOP)])
     (d / "cli").mkdir()
     shutil.copy(d / "r.h5.partial", d / "cli" / "r.h5.partial")
     return {"scene": sc, "whole": whole, "result": res, "dir": d}

@@ -21,6 +21,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from conftest import InterruptAt
+
 MDGRAN = [sys.executable, "-m", "mdgran"]
 
 
@@ -201,16 +203,9 @@ def partial(tmp_path_factory, request):
     whole = d / "whole.h5"
     run(sc, "reference", out=whole)
 
-    class Stop:
-        def report(self, frame, ledger):
-            if frame.time >= 12.0:
-                raise KeyboardInterrupt
-
-        def close(self, status):
-            pass
-
     with pytest.raises(KeyboardInterrupt):
-        run(sc, "reference", out=d / "r.h5", checkpoint_every=0.0, reporters=[Stop()])
+        run(sc, "reference", out=d / "r.h5", checkpoint_every=0.0,
+            reporters=[InterruptAt(12.0)])
     return sc, d / "r.h5.partial", whole
 
 
