@@ -240,6 +240,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     numbers["status"] = run_status({"micro-star": micro, "macro-hertz": macro}, cases)
     numbers["status"]["sweep_not_complete"] += failed
     numbers["decay"] = kinetic_decay(micro, micro_sc, macro, macro_sc)
+    numbers["paper_details"] = paper_details()
     say("controls: the macro chain matched in m/s, and with adhesion (Schwarz at its lambda)")
     numbers["controls"] = controls.run_controls(out / "runs", backend, duration, progress,
                                                 have={"micro": micro, "macro-pulse": macro})
@@ -620,6 +621,54 @@ def smoothing_sensitivity(traj, scene) -> list:
     return rows
 
 
+#: the paper's Table II (SI): bead diameter d, wire length L_s, wire diameter d_s, K_1, wire
+#: tension T_s and the stress column sigma_y it prints
+TABLE_II = ({"d": 2.5e-6, "L_s": 6.25e-6, "d_s": 1e-6, "K_1": 21.5, "T_s": 67.2e-6,
+             "sigma_y": 2.19e6},
+            {"d": 2.5e-3, "L_s": 6.25e-3, "d_s": 1e-3, "K_1": 2150.0, "T_s": 6.72,
+             "sigma_y": 0.219e6})
+
+
+def paper_details() -> dict:
+    """Two details of the paper the report states: (1) Table II's stress column is T_s over a
+    circle of the wire's *length* as diameter, T_s / (pi L_s^2 / 4), not T_s / A_s with
+    A_s = pi d_s^2 / 4; (2) the COS relation the paper uses for fc against the exact
+    Maugis-Dugdale pull-off (:func:`mdgran.contact.maugis_dugdale_pulloff`)."""
+    from .contact import fc_from_lambda, maugis_dugdale_pulloff
+
+    wires = [{"d": r["d"], "printed_MPa": r["sigma_y"] / 1e6,
+              "T_s_over_pi_L_s2_4_MPa": r["T_s"] / (math.pi * r["L_s"] ** 2 / 4) / 1e6,
+              "T_s_over_A_s_MPa": r["T_s"] / (math.pi * r["d_s"] ** 2 / 4) / 1e6,
+              "K_1_from_2_T_s_over_L_s": 2 * r["T_s"] / r["L_s"], "K_1_printed": r["K_1"]}
+             for r in TABLE_II]
+    pulloff = [{"lambda": lam, "cos": fc_from_lambda(lam, "cos"),
+                "maugis_dugdale": maugis_dugdale_pulloff(lam)} for lam in (0.3, 0.64, 1.5)]
+    for p in pulloff:
+        p["cos_over_md_minus_1"] = p["cos"] / p["maugis_dugdale"] - 1.0
+    return {"table_II": wires, "pull_off": pulloff}
+
+
+def paper_details_markdown(pd: dict) -> list:
+    L = ["## Details of the paper", "",
+         "Table II's stress column equals the wire tension over a circle whose diameter is the "
+         "wire's length, T_s / (pi L_s^2 / 4); the tensile stress in the wire is T_s / A_s "
+         "with A_s = pi d_s^2 / 4:", "",
+         "| bead d | printed | T_s / (pi L_s^2/4) | T_s / A_s | K_1 = 2 T_s / L_s (printed) |",
+         "|---|---|---|---|---|"]
+    for w in pd["table_II"]:
+        L.append(f"| {w['d']:g} m | {w['printed_MPa']:.3g} MPa | "
+                 f"{w['T_s_over_pi_L_s2_4_MPa']:.3g} MPa | {w['T_s_over_A_s_MPa']:.3g} MPa | "
+                 f"{w['K_1_from_2_T_s_over_L_s']:.4g} N/m ({w['K_1_printed']:g}) |")
+    L += ["", "The paper's COS relation for the pull-off force fc (units of pi R w) against "
+          "the exact Maugis-Dugdale pull-off (`contact.fc_rule = \"maugis-dugdale\"` runs "
+          "with it):", "", "| lambda | COS | exact MD | COS overstates by |", "|---|---|---|---|"]
+    for p in pd["pull_off"]:
+        L.append(f"| {p['lambda']:g} | {p['cos']:.4f} | {p['maugis_dugdale']:.4f} | "
+                 f"{100 * p['cos_over_md_minus_1']:.1f}% |")
+    return L + ["", "The COS relation tends to -1.515 as lambda grows and never reaches the JKR "
+                "limit -1.5; the exact pull-off does.", ""]
+
+
 def controls_markdown(ctl: dict) -> list:
     """report.md's section on the controls of the macro/micro comparison (mdgran.controls)."""
     L = ["## What survives: the controls of the macro/micro comparison", "",
@@ -659,6 +708,7 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
         L += ["**Small version** (the sweep's CI-sized grid): the sweep figures and Fig. 7 "
               "have too few cases to mean anything; run without --small for the study.", ""]
     L += controls_markdown(nb["controls"])
+    L += paper_details_markdown(nb["paper_details"])
     if "nulls" in nb:
         L += nulls_markdown(nb["nulls"])
         L += ["| claim (paper) | mdgran's measurement | null | verdict |", "|---|---|---|---|"]

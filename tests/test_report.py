@@ -48,3 +48,22 @@ def test_report_small(tmp_path):
     before = (out / "runs" / "micro-star.h5").stat().st_mtime_ns
     assert main(["report", str(out), "--small", "--quiet"]) == 0
     assert (out / "runs" / "micro-star.h5").stat().st_mtime_ns == before
+
+
+def test_paper_details_reproduce_the_printed_table_and_the_pull_off_check_values():
+    """Table II's stress column is T_s / (pi L_s^2 / 4) (the printed 2.19 and 0.219 MPa), the
+    stress in the wire T_s / A_s is 85.6 and 8.56 MPa; the COS relation overstates the exact
+    Maugis-Dugdale pull-off by 10.8% at lambda = 0.64 (-1.852 against -1.672)."""
+    from mdgran.study import paper_details
+
+    pd = paper_details()
+    micro, macro = pd["table_II"]
+    assert micro["T_s_over_pi_L_s2_4_MPa"] == pytest.approx(micro["printed_MPa"], rel=2e-3)
+    assert macro["T_s_over_pi_L_s2_4_MPa"] == pytest.approx(macro["printed_MPa"], rel=2e-3)
+    assert micro["T_s_over_A_s_MPa"] == pytest.approx(85.6, rel=1e-3)
+    assert macro["T_s_over_A_s_MPa"] == pytest.approx(8.56, rel=1e-3)
+    assert micro["K_1_from_2_T_s_over_L_s"] == pytest.approx(21.5, rel=1e-3)
+    row = {p["lambda"]: p for p in pd["pull_off"]}[0.64]
+    assert row["cos"] == pytest.approx(-1.852, abs=1e-3)
+    assert row["maugis_dugdale"] == pytest.approx(-1.672, abs=1e-3)
+    assert row["cos_over_md_minus_1"] == pytest.approx(0.108, abs=1e-3)
