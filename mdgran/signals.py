@@ -67,7 +67,8 @@ def _deliver(signum: int, handler):
     if handler is signal.SIG_IGN:
         return
     if callable(handler) and handler is not signal.default_int_handler:
-        handler(signum, None)  # a handler of the caller's (ours raises Interrupted)
+        handler(signum, None)  # the caller's handler decides (ours raises Interrupted)
+        return
     raise Interrupted(signum)  # Python's default for SIGINT raises; SIGTERM's would kill
 
 

@@ -320,3 +320,26 @@ def test_a_symlinked_output_is_written_through(tmp_path):
                  "--quiet"]) == 0
     assert link.is_symlink() and h5py.is_hdf5(target)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link.h5", "real.h5"]
+
+
+def test_a_held_signal_goes_to_the_callers_handler_or_raises_after_the_block():
+    """signals.deferred holds SIGINT/SIGTERM while C code runs: afterwards a handler of the
+    caller's gets it once (and decides), Python's default raises Interrupted."""
+    from mdgran.signals import Interrupted, deferred
+
+    seen = []
+    before = signal.signal(signal.SIGTERM, lambda s, f: seen.append(s))
+    try:
+        with deferred():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.05)
+            assert seen == []  # held inside the block
+        assert seen == [signal.SIGTERM]
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        with pytest.raises(Interrupted) as exc:
+            with deferred():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.05)
+        assert exc.value.signum == signal.SIGTERM
+    finally:
+        signal.signal(signal.SIGTERM, before)
