@@ -147,22 +147,21 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
     * ``checkpoint_every`` (seconds), ``resume``, ``collective``, ``reporters``: as in
       :func:`mdgran.simulation.run`.
     * ``**options``: the backend's own options, e.g. ``tolerance=`` (reference), ``dt=`` or
-      ``locate_events=`` (fast), ``contact="native"`` (lammps).  Any other keyword raises
+      ``locate_events=`` (fast), ``contact="native"`` (lammps); or in ``backend`` itself, e.g. ``"lammps:native"`` (see
+      :mod:`mdgran.backends`).  Any other keyword raises
       ``TypeError`` naming it, before anything runs.
 
     A run whose energy-ledger error exceeds the backend's declared bound is returned with
     ``status = "ledger-exceeded: ..."`` (not raised): check ``result.status == "complete"``.
     """
-    from .backends import BACKENDS, get_backend
+    from .backends import get_backend
     from .scene import SceneError
-    from .simulation import BackendUnavailable
+    from .simulation import BackendUnavailable, spec_of
     from .simulation import run as simulate
 
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise SceneError("backend", f"must be one of {', '.join(map(repr, BACKENDS))}, not "
-                         f"{backend!r}")
+    name, _ = spec_of(backend)  # "lammps:native": a backend and its options (mdgran.backends)
     try:
-        accepted = tuple(get_backend(backend).accepted_options)
+        accepted = tuple(get_backend(name).accepted_options)
     except ImportError as exc:
         raise BackendUnavailable(f"backend {backend!r} is not available: {exc}") from None
     unknown = [k for k in options if k not in accepted]

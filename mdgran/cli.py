@@ -225,6 +225,7 @@ def cmd_run(args) -> int:
     small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
     try:
         res = run(scene, args.backend, out=args.out, progress=not args.quiet,
+                  **{k: v for k, v in (("contact", args.contact), ("events", args.events)) if v},
                   keep=small and not args.quiet,
                   raise_errors=False, resume=args.resume,
                   checkpoint_every=args.checkpoint if args.checkpoint > 0 else None)
@@ -347,7 +348,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("run", help="run a scene on one backend, write H5MD")
     scene_args(s)
-    s.add_argument("--backend", default="reference", help="reference | lammps | fast")
+    s.add_argument("--backend", default="reference",
+                   help="reference | lammps | fast, optionally with options: lammps:native, "
+                   "fast:quantized, fast:dt=0.005 (see docs/backends.md)")
+    s.add_argument("--contact", choices=("hook", "native"), default=None,
+                   help="lammps: the contact as the Python hook (default) or the native C++ "
+                   "plugin (same as --backend lammps:native)")
+    s.add_argument("--events", choices=("located", "quantized"), default=None,
+                   help="lammps native contact: snap events located inside the step (second "
+                   "order) or switched at step ends (first order, plain MD)")
     s.add_argument("--out", required=True, help="output file (.h5; not a folder: a name "
                    "ending in / is refused)")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -363,7 +372,9 @@ def build_parser() -> argparse.ArgumentParser:
     scene_args(s)
     s.add_argument("--out", required=True, help="report folder")
     s.add_argument("--backends", default="reference,lammps",
-                   help="comma-separated, the first is the reference (default reference,lammps)")
+                   help="comma-separated backend specs, the first is the reference (default "
+                   "reference,lammps); e.g. reference,lammps,lammps:native pits the reference, "
+                   "the LAMMPS hook and the native contact against each other")
     s.add_argument("--ensemble", type=int, default=3,
                    help="extra runs per backend with the impulse changed by k x 1e-3, for the "
                    "cluster statistics past the horizon (default 3)")
@@ -403,6 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: library parameter -> the command-line flag that sets it (errors name what the user typed)
 FLAGS = {"out": "--out", "resume": "--resume", "backend": "--backend",
+         "contact": "--contact", "events": "--events",
          "executor": "--executor", "workers": "--workers"}
 
 

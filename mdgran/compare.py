@@ -56,6 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .backends import spec_stem
 from .simulation import run
 
 PREDICTABLE = 1e-2
@@ -151,7 +152,7 @@ def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEM
     overrides, factor = refinement or make_backend(scene, name).refinement(scene)
     prog = progress and series is None
     t0 = _time.perf_counter()
-    out = Path(out_dir) / f"{name}.h5" if out_dir is not None else None
+    out = Path(out_dir) / f"{spec_stem(name)}.h5" if out_dir is not None else None
     res = _run(series, (name, "nominal"), scene, name, out=out, progress=prog)
     nominal = res.trajectory
     wall = _time.perf_counter() - t0

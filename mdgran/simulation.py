@@ -20,7 +20,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from .backends import BACKENDS, get_backend
+from .backends import BadSpec, get_backend, parse_spec
 from .backends.base import IntegrationError
 from .checkpoint import CheckpointError
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
@@ -167,12 +167,33 @@ def check_resources(scene, out=None, keep: bool = True):
 
 
 def make_backend(scene, backend: str, **options):
-    if backend not in BACKENDS:
-        raise SceneError("backend", f"must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    """The backend named by the spec ``backend`` (``"lammps:native"``: name and options, see
+    :mod:`mdgran.backends`), constructed for ``scene`` with the spec's options and ``options``
+    (an option given both ways must agree).  The options a run was made with, if any, are kept
+    in ``stats["options"]`` (stored with the run)."""
+    name, spec_options = spec_of(backend)
+    for key, value in spec_options.items():
+        if key in options and options[key] != value:
+            raise SceneError("backend", f"{backend!r} sets {key} = {value!r}, but "
+                             f"{key} = {options[key]!r} was given too")
+    options = {**spec_options, **options}
     try:
-        return get_backend(backend)(scene, **options)
+        b = get_backend(name)(scene, **options)
     except ImportError as exc:
         raise BackendUnavailable(f"backend {backend!r} is not available: {exc}") from None
+    kept = {k: v for k, v in options.items() if isinstance(v, (str, int, float, bool))}
+    if kept:
+        b.stats["options"] = kept
+    return b
+
+
+def spec_of(backend: str) -> tuple[str, dict]:
+    """``(name, options)`` of a backend spec; a bad one is a :class:`SceneError` on key
+    ``backend`` (one line saying what is allowed)."""
+    try:
+        return parse_spec(backend)
+    except BadSpec as exc:
+        raise SceneError("backend", str(exc)) from None
 
 
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,

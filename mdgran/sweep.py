@@ -256,8 +256,9 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
     options = {}
     if comm_self:
         from .backends import get_backend
+        from .simulation import spec_of
 
-        if "comm" in getattr(get_backend(backend), "accepted_options", ()):
+        if "comm" in getattr(get_backend(spec_of(backend)[0]), "accepted_options", ()):
             from mpi4py import MPI
 
             options["comm"] = MPI.COMM_SELF
@@ -576,7 +577,7 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     (:class:`mdgran.progress.SweepProgress`); on a terminal one line redrawn at most every
     ``progress_interval`` seconds (default 1), elsewhere a line per finished case and, between,
     one after ``progress_interval`` (default 15) seconds of silence."""
-    from .backends import BACKENDS
+    from .simulation import spec_of
 
     if executor not in ("process", "mpi"):
         raise SceneError("--executor", f"must be 'process' or 'mpi', not {executor!r}")
@@ -589,9 +590,7 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     stream = stream or sys.stderr
     sweep = load_sweep(spec, overrides, small, realizations)
     if backend is not None:
-        if backend not in BACKENDS:
-            raise SceneError("--backend", f"must be one of {', '.join(BACKENDS)}, not "
-                             f"{backend!r}")
+        spec_of(backend)  # a bad spec: SceneError on "backend", before anything runs
         sweep["backend"] = backend
     out = Path(out_dir)
     if (out / "sweep.json").exists():

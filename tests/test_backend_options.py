@@ -39,3 +39,58 @@ def test_richardson_factor_follows_the_order_as_constructed():
     assert located == [("run.dt", 0.005)] and factor == pytest.approx(4.0 / 3.0)
     assert make_backend(SCENE, "fast").refinement()[1] == pytest.approx(4.0 / 3.0)
     assert make_backend(SCENE, "reference").refinement(SCENE) == ([("run.tolerance", 1e-12)], 1.0)
+
+
+# ---- backend specs: "fast:quantized", "lammps:native", "fast:dt=0.005" ---------------------
+
+def test_spec_runs_what_the_explicit_options_run():
+    import numpy as np
+
+    by_spec = run(SCENE, "fast:quantized:dt=0.005")
+    explicit = run(SCENE, "fast", locate_events=False, dt=0.005)
+    default = run(SCENE, "fast")
+    assert np.array_equal(by_spec.trajectory.x, explicit.trajectory.x)
+    assert not np.array_equal(by_spec.trajectory.x, default.trajectory.x)  # the spec mattered
+    assert by_spec.stats["options"] == {"locate_events": False, "dt": 0.005}
+    assert "options" not in default.stats  # a run with no options stores none
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("fats", "reference, lammps, fast"),
+    ("fast:native", "located, quantized, or KEY=VALUE"),
+    ("reference:quantized", "KEY=VALUE"),
+    ("fast:dt=0.005:dt_max=1", "dt_max"),  # an option the backend does not take
+])
+def test_bad_spec_is_one_line_naming_what_is_allowed(spec, words):
+    with pytest.raises(SceneError) as exc:
+        run(SCENE, spec)
+    msg = str(exc.value)
+    assert "\n" not in msg and words in msg
+
+
+def test_spec_and_keyword_must_agree():
+    with pytest.raises(SceneError) as exc:
+        run(SCENE, "fast:quantized", locate_events=True)
+    assert exc.value.key == "backend" and "locate_events" in str(exc.value)
+    assert run(SCENE, "fast:quantized", locate_events=False).status == "complete"
+
+
+def test_cli_backend_spec_and_contact_flag(tmp_path, capsys):
+    import json
+
+    import h5py
+
+    from mdgran.cli import main
+
+    out = tmp_path / "q.h5"
+    assert main(["run", "collision-pair", "--set", "run.duration=0.1", "--backend",
+                 "fast:quantized", "--out", str(out), "--quiet"]) == 0
+    with h5py.File(out) as f:
+        stats = json.loads(f["parameters"].attrs["backend_stats"])
+    assert stats["options"] == {"locate_events": False}
+    # --contact belongs to lammps: another backend rejects it by its flag, nothing written
+    assert main(["run", "collision-pair", "--backend", "fast", "--contact", "native",
+                 "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mdgran: --contact") or "--contact" in err.splitlines()[-1]
+    assert not (tmp_path / "x.h5").exists()
