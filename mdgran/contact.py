@@ -15,7 +15,12 @@ where ``delta`` is monotone, so ``f`` is a single-valued function of ``delta`` t
 inverted to machine precision by Newton's method on ``phi(w) = sqrt(delta - delta_min)`` with
 ``w = t - t_min`` (``phi`` is increasing and convex, with ``phi'(0) > 0``, so Newton started
 above the root converges monotonically and quadratically even at the snap-off point, where
-``t(delta)`` has a square-root singularity).
+``t(delta)`` has a square-root singularity).  That inversion is
+:func:`mdgran.contact_scalar.branch_t`, the fast kernel's own, applied elementwise.  The
+polynomials in ``t`` (force, energy, stiffness) are evaluated here with numpy's ``**`` and in
+the kernel (:mod:`mdgran.contact_scalar`) with products (``t*t*t``): the two differ in the last
+bit for about a quarter of all ``t``, and both the reference backend and the force table that
+the fast backend interpolates are kept bit for bit as they were, so those lines exist twice.
 
 The contact energy on the attached branch, ``V(delta) = integral_0^delta f d delta'``, is the
 closed-form polynomial ``P(t) - P(t0)`` with ``P`` the antiderivative of ``f(t) delta'(t)`` and
@@ -44,6 +49,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .contact_scalar import branch_t_ufunc
+
 #: Contact-law names a scene may use.
 LAWS = ("schwarz", "jkr", "dmt", "hertz")
 #: Snap-off rules.
@@ -55,7 +62,6 @@ FC_RULES = ("cos", "maugis-dugdale")
 
 FC_DMT = -2.0
 FC_JKR = -1.5
-NEWTON_STEPS = 7
 
 
 def fc_from_lambda(lam: float, rule: str = "cos") -> float:
@@ -281,23 +287,11 @@ class ContactLaw:
 
         Below ``delta_min`` the value is clamped to ``t_min`` (the force then stays at ``f_off``,
         a continuous extension used only inside an integration step that overshoots an event).
+        Newton's method on ``sqrt(delta - delta_min)``: the scalar
+        :func:`mdgran.contact_scalar.branch_t`, the fast kernel's own, applied elementwise.
         """
         d = np.asarray(delta, dtype=float)
-        tm = self.t_min
-        big = 6.0 * tm * tm
-        rhs = np.sqrt(np.maximum(d - self.delta_min, 0.0))  # target value of phi(w)
-        # Newton on phi(w) = w sqrt(w^2 + 4 tm w + 6 tm^2) = rhs from an upper bound: phi >=
-        # max(sqrt(6) tm w, w^2), so w0 = min(rhs / (sqrt(6) tm), sqrt(rhs)) is above the root.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w = np.sqrt(rhs) if tm == 0.0 else np.minimum(rhs / math.sqrt(big), np.sqrt(rhs))
-        if tm == 0.0:
-            return w  # DMT: phi(w) = w^2, exact
-        # The start is within 30 % of the root over the whole branch; quadratic convergence
-        # reaches round-off after 5 steps (0.29, 4e-2, 8e-4, 3e-7, 4e-14, 2e-16): 7 is a margin.
-        for _ in range(NEWTON_STEPS):
-            sq = np.sqrt(w * w + 4.0 * tm * w + big)
-            w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq)
-        return tm + np.maximum(w, 0.0)
+        return branch_t_ufunc()(d, self.sigma, self.t_min, self.delta_min)
 
     def force(self, delta):
         """Force on the attached branch (positive = repulsive), for a closed contact."""

@@ -40,6 +40,7 @@ import time as _time
 import numpy as np
 
 from ..contact import ContactTable
+from ..contact_scalar import schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
 from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
@@ -79,26 +80,19 @@ class FastBackend(Backend):
         law = m.law
         self.table = (ContactTable(law, delta_max=delta_max) if table_points is None
                       else ContactTable(law, int(table_points), delta_max))
-        sigma, tm = law.sigma, law.t_min
-        t0 = (4.0 * sigma) ** (1.0 / 3.0)
-        pr = np.zeros(fk.N_PR)
-        pr[fk.PR_GAP], pr[fk.PR_C], pr[fk.PR_K1], pr[fk.PR_K3] = m.gap, m.damping, m.k1, m.k3
-        pr[fk.PR_DOFF] = law.delta_off
-        pr[fk.PR_BASE] = self.table.base
-        pr[fk.PR_TSCALE] = self.table._scale
-        pr[fk.PR_WLIM] = self.table.n - 1
-        pr[fk.PR_DMAX] = self.table.delta_max
-        pr[fk.PR_WSTEP] = self.table._h
-        if law.kind == "schwarz":
-            pr[fk.PR_FC], pr[fk.PR_SIGMA], pr[fk.PR_TMIN], pr[fk.PR_DMIN] = (
-                law.fc, sigma, tm, law.delta_min)
-            pr[fk.PR_E0] = float(law._antiderivative(t0))
-        singular = law.kind == "schwarz" and law.snap_off == "displacement" and tm > 0.0
-        pr[fk.PR_SING] = law.delta_min + fk.SING_BAND if singular else -math.inf
-        self.pr = pr
-        self.tab = np.ascontiguousarray(self.table.f_coef, dtype=float)  # [n - 1, 4]
-        self.kernel = fk.get_kernel(m.walls, m.damping != 0.0, m.k1 != 0.0, m.k3 != 0.0,
-                                   self.locate, contact_eval == "exact", law.kind == "hertz")
+        table = fk.ForceTable(np.ascontiguousarray(self.table.f_coef, dtype=float),
+                              float(self.table.base), float(self.table._scale),
+                              float(self.table.n - 1), float(self.table._h))
+        singular = law.kind == "schwarz" and law.snap_off == "displacement" and law.t_min > 0.0
+        self.params = fk.Params(
+            gap=float(m.gap), damping=float(m.damping), k1=float(m.k1), k3=float(m.k3),
+            delta_off=float(law.delta_off), delta_max=self.table.delta_max,
+            mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
+            law=schwarz_constants(law), table=table)
+        self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
+                              k3_on=m.k3 != 0.0, locate=self.locate,
+                              exact=contact_eval == "exact", hertz=law.kind == "hertz")
+        self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
                       "dt": self.dt, "steps": 0, "events": 0, "event_substeps": 0,
@@ -108,45 +102,42 @@ class FastBackend(Backend):
 
     # ---- state ----------------------------------------------------------------------------
     def _alloc(self):
-        n, nc = self.model.n, self.model.n_contacts
-        self.X = np.zeros((2, n))
-        self.V = np.zeros((2, n))
-        self.A = np.zeros((2, n))
-        self.closed = np.zeros(nc, dtype=np.bool_)
-        self.st = np.zeros(fk.N_ST, dtype=np.int64)
-        self.sc = np.zeros(fk.N_SC)
-        self.sc[fk.SC_CHATT] = -1.0
-        self.flags = np.zeros(fk.FLAG_CAP, dtype=np.int64)
-        self.swl = np.zeros(fk.FLAG_CAP, dtype=np.int64)
-        self.evt = np.zeros(EVENT_BUFFER)
-        self.evj = np.zeros(EVENT_BUFFER, dtype=np.int64)
-        self.evk = np.zeros(EVENT_BUFFER, dtype=np.int8)
-        self.chat = np.zeros((fk.CHAT_CAP, 2), dtype=np.int64)
+        n = self.model.n
+        self.buffers = fk.Beads(np.zeros((2, n)), np.zeros((2, n)), np.zeros((2, n)))
+        self.ks = fk.new_state(self.model.n_contacts, EVENT_BUFFER)
+        self.closed = self.ks.closed
+        self.counters = self.ks.counters[0]  # a view: reads and writes go to the kernel's
         self._pending: list = []
 
+    def _current(self) -> fk.Beads:
+        """The beads' current state (views of the kernel's buffer)."""
+        c = int(self.counters["current"])
+        return fk.Beads(self.buffers.x[c], self.buffers.v[c], self.buffers.a[c])
+
     def _take_events(self) -> list:
-        k = int(self.st[fk.ST_EVN])
+        k = int(self.counters["events"])
         if k == 0:
             return []
         nums = self.model.contact_numbers
-        order = np.argsort(self.evt[:k], kind="stable")  # quantized: per step, by contact
-        evs = [Event(float(self.evt[i]), int(nums[self.evj[i]]),
-                     CLOSE if self.evk[i] == 1 else OPEN) for i in order]
-        self.st[fk.ST_EVN] = 0
+        log = self.ks.log
+        order = np.argsort(log.time[:k], kind="stable")  # quantized: per step, by contact
+        evs = [Event(float(log.time[i]), int(nums[log.contact[i]]),
+                     CLOSE if log.kind[i] == 1 else OPEN) for i in order]
+        self.counters["events"] = 0
         self.stats["events"] += k
         return evs
 
     def _check(self):
-        status = int(self.st[fk.ST_STATUS])
+        status = int(self.counters["status"])
         if status in (fk.OK, fk.EVENTS_FULL):
-            self.st[fk.ST_STATUS] = fk.OK
+            self.counters["status"] = fk.OK
             return
-        t = float(self.sc[fk.SC_BADT])
-        j = int(self.st[fk.ST_BAD])
+        t = float(self.counters["bad_time"])
+        j = int(self.counters["bad_contact"])
         num = int(self.model.contact_numbers[j]) if 0 <= j < self.model.n_contacts else j
-        c = self.X[int(self.st[fk.ST_CUR])]
         if status == fk.OUT_OF_TABLE:
-            d = float(self.model.compressions(c)[j]) if 0 <= j < len(self.closed) else math.nan
+            inside = 0 <= j < len(self.closed)
+            d = float(self.model.compressions(self._current().x)[j]) if inside else math.nan
             dmax = self.table.delta_max
             if not math.isfinite(d):
                 raise IntegrationError(f"non-finite state at t = {t:.12g}, contact {num}")
@@ -174,68 +165,65 @@ class FastBackend(Backend):
         return dict(self._snapshot)
 
     def _snap(self, i_out):
-        c = int(self.st[fk.ST_CUR])
-        y = np.concatenate([self.X[c], self.V[c], self.A[c],
-                            [self.sc[fk.SC_DVISC], self.sc[fk.SC_POWER]]])
+        now, cnt = self._current(), self.counters
+        y = np.concatenate([now.x, now.v, now.a, [cnt["d_viscous"], cnt["power"]]])
         self._snapshot = {"t": float(self._out_times[i_out]), "y": y,
-                          "closed": self.closed.copy(), "d_hyst": float(self.sc[fk.SC_DHYST]),
+                          "closed": self.closed.copy(), "d_hyst": float(cnt["d_hysteresis"]),
                           "i_out": int(i_out)}
 
     def _frame(self, i_out, t, events) -> Frame:
-        c = int(self.st[fk.ST_CUR])
-        x, v = self.X[c].copy(), self.V[c].copy()
+        now = self._current()
+        x, v = now.x.copy(), now.v.copy()
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
             bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0]) + 1
             raise IntegrationError(f"non-finite state at t = {t:.12g}, bead {bad}")
         return Frame(step=int(i_out), time=float(t), x=x, v=v, closed=self.closed.copy(),
-                     dissipated_viscous=float(self.sc[fk.SC_DVISC]),
-                     dissipated_hysteresis=float(self.sc[fk.SC_DHYST]), events=events)
+                     dissipated_viscous=float(self.counters["d_viscous"]),
+                     dissipated_hysteresis=float(self.counters["d_hysteresis"]), events=events)
 
     # ---- main loop ------------------------------------------------------------------------
     def frames(self, resume: dict | None = None):
         """Integrate the scene; yield a Frame at every output time (see the module doc)."""
-        cfg, advance = self.kernel
         wall0 = _time.perf_counter()
         out_times = self._out_times = self.output_times()  # once: _snap reads it every frame
         n = self.model.n
         self._alloc()
-        args = lambda: (self.closed, self.pr, self.tab)  # noqa: E731
+        cnt = self.counters
+        kernel_args = fk.plain((self.params, self.buffers, self.ks))
         if resume is None:
             imp = self.scene.data["impulse"]
             x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
-            self.X[0], self.V[0], self.closed[:] = x, v, closed
-            fk.settle_all(cfg, 0.0, self.X[0], self.V[0], self.A[0], *args(), self.st, self.sc,
-                       self.evt, self.evj, self.evk, self.chat)
-            self.sc[fk.SC_POWER] = fk.init_acc(cfg, self.X[0], self.V[0], self.A[0],
-                                              *args(), self.st)
+            now = self._current()
+            now.x[:], now.v[:], self.closed[:] = x, v, closed
+            fk.settle_all(self.flags, self.params, 0.0, now, self.ks)
+            cnt["power"] = fk.init_acc(self.flags, self.params, now, self.ks)
             self._check()
             i_out = 0
             self._snap(0)
             yield self._frame(0, 0.0, self._take_events())
         else:
             y = np.asarray(resume["y"], dtype=float)
-            self.X[0], self.V[0], self.A[0] = y[:n], y[n:2 * n], y[2 * n:3 * n]
-            self.sc[fk.SC_DVISC], self.sc[fk.SC_POWER] = y[3 * n], y[3 * n + 1]
-            self.sc[fk.SC_DHYST] = float(resume["d_hyst"])
+            now = self._current()
+            now.x[:], now.v[:], now.a[:] = y[:n], y[n:2 * n], y[2 * n:3 * n]
+            cnt["d_viscous"], cnt["power"] = y[3 * n], y[3 * n + 1]
+            cnt["d_hysteresis"] = float(resume["d_hyst"])
             self.closed[:] = np.asarray(resume["closed"], dtype=bool)
             i_out = int(resume["i_out"])
-            self.st[fk.ST_STEP] = i_out * self.steps_per_frame
+            cnt["step"] = i_out * self.steps_per_frame
         try:
             for i in range(i_out + 1, len(out_times)):
                 target = i * self.steps_per_frame
                 k0 = _time.perf_counter()
-                while self.st[fk.ST_STEP] < target:
-                    advance(int(target - self.st[fk.ST_STEP]), self.dt, self.X, self.V, self.A,
-                            *args(), self.flags, self.swl, self.st, self.sc, self.evt,
-                            self.evj, self.evk, self.chat)
-                    if self.st[fk.ST_STATUS] == fk.EVENTS_FULL:
+                while cnt["step"] < target:
+                    self.advance(*kernel_args, int(target - cnt["step"]), self.dt)
+                    if cnt["status"] == fk.EVENTS_FULL:
                         self._pending += self._take_events()
                     self._check()
                 self.stats["kernel_s"] += _time.perf_counter() - k0
                 events = self._pending + self._take_events()
                 self._pending = []
-                self.stats["steps"] = int(self.st[fk.ST_STEP])
-                self.stats["event_substeps"] = int(self.st[fk.ST_SUBSTEPS])
+                self.stats["steps"] = int(cnt["step"])
+                self.stats["event_substeps"] = int(cnt["substeps"])
                 frame = self._frame(i, out_times[i], events)
                 self._snap(i)
                 yield frame

@@ -39,34 +39,34 @@ computed; the event time is interpolated linearly in the step (as the LAMMPS bac
 
 **Force** ``f(delta)``: the table of :class:`mdgran.contact.ContactTable`, nodes uniform in
 ``w = sqrt(delta - base)`` (``base = delta_min``, 0 for Hertz) with a cubic spline in ``w``
-between them (``tab[i]`` = the cubic's coefficients on interval ``i``), or the exact law
-(``exact = True``: Newton inversion, slower).  Hertz always uses the exact ``delta^(3/2)``
-(cheaper than the table, and free of the spline's round-off force near ``delta = 0``, which
-made resting contacts ahead of the pulse flicker).  Energies at events use the exact law.
+between them (:class:`ForceTable`), or the exact law (``exact = True``: Newton inversion,
+slower).  Hertz always uses the exact ``delta^(3/2)`` (cheaper than the table, and free of
+the spline's round-off force near ``delta = 0``, which made resting contacts ahead of the
+pulse flicker).  Energies at events use the exact law.  The exact law is the scalar one of
+:mod:`mdgran.contact_scalar`.
 
 Terms switched off (walls, damping, k1, k3, event location, exact law) are compile-time
-constants of :func:`get_kernel`: each combination is a separately compiled variant (cached
-on disk by numba), so an absent term costs nothing in the loop.
+constants of :func:`get_kernel` (:class:`Flags`): each combination is a separately compiled
+variant (cached on disk by numba), so an absent term costs nothing in the loop.
+
+**Records** (numba named tuples and one structured record, so that each function takes a
+few arguments that say what they are): :class:`Flags` (the variant), :class:`Params` (the
+run's constants, with the law's :class:`~mdgran.contact_scalar.SchwarzConstants` and the
+:class:`ForceTable`), :class:`Beads` (``x, v, a``), :class:`KernelState` (contact states,
+the :data:`COUNTERS` record, the :class:`EventLog`, scratch lists), all updated in place.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-# status codes (st[ST_STATUS])
+from ..contact_scalar import SchwarzConstants, law_energy, law_force, schwarz_mean_force
+
+# status codes (counters.status)
 OK, OUT_OF_TABLE, CHATTER, TOO_MANY_SUBSTEPS, EVENTS_FULL, EVENT_OVERFLOW = 0, 1, 2, 3, 4, 5
-# integer state st[...]
-ST_CUR, ST_STEP, ST_EVN, ST_STATUS, ST_BAD, ST_NFLAG, ST_CHATN, ST_SUBSTEPS = range(8)
-N_ST = 8
-# float state sc[...]
-SC_DVISC, SC_DHYST, SC_POWER, SC_BADT, SC_CHATT = range(5)
-N_SC = 5
-# parameters pr[...]
-(PR_GAP, PR_C, PR_K1, PR_K3, PR_DOFF, PR_BASE, PR_TSCALE, PR_WLIM, PR_DMAX, PR_FC, PR_SIGMA,
- PR_TMIN, PR_DMIN, PR_E0, PR_SING, PR_WSTEP) = range(16)
-N_PR = 16
 
 MAX_SWITCHES = 4  # switches of one contact at one instant before the run stops (chatter)
 MAX_SUBSTEPS = 10000  # event splits in one step
@@ -77,61 +77,112 @@ STATE_TOL = 1e-12
 FLAG_CAP = 64  # flagged contacts remembered per pass (beyond: all contacts are scanned)
 CHAT_CAP = 64
 #: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
-#: displacement rule); see `law_mean_force`.
+#: displacement rule); see `verlet_pass`.
 SING_BAND = 0.1
-# 5-point Gauss-Legendre nodes and weights on [-1, 1]
-GL_X = np.array([-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
-                 0.9061798459386640])
-GL_W = np.array([0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
-                 0.4786286704993665, 0.2369268850561891])
 
 
-# ---- the exact law (events, energies, and the optional exact force) ----------------------
-@njit(cache=True)
-def branch_t(d, sigma, tm, dmin):
-    """Branch parameter t >= t_min with t^4 - 4 sigma t = d (Newton on sqrt(d - dmin), as
-    :meth:`mdgran.contact.ContactLaw.t_of_delta`); clamped to t_min below dmin."""
-    rhs = math.sqrt(max(d - dmin, 0.0))
-    if tm == 0.0:
-        return math.sqrt(rhs)
-    big = 6.0 * tm * tm
-    w = min(rhs / math.sqrt(big), math.sqrt(rhs))
-    for _ in range(7):
-        sq = math.sqrt(w * w + 4.0 * tm * w + big)
-        w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq)
-    return tm + max(w, 0.0)
+# ---- the kernel's records -----------------------------------------------------------------
+class Flags(NamedTuple):
+    """Which terms a compiled variant has (compile-time constants of :func:`get_kernel`)."""
+
+    walls: bool  # a fixed wall at each end (contacts 0..n; else 1..n-1 between the beads)
+    damped: bool  # unilateral damping force c * d delta/dt in closed contacts
+    k1_on: bool  # linear substrate force -k1 x
+    k3_on: bool  # cubic substrate force -k3 x^3
+    locate: bool  # events located inside the step (else switched at the step's end)
+    exact: bool  # the exact law instead of the force table
+    hertz: bool  # the Hertz law (else Schwarz)
 
 
-@njit(cache=True)
-def law_force(d, hertz, pr):
-    """Exact attached-branch force f(delta) (units eta)."""
-    if hertz:
-        dp = max(d, 0.0)
-        return dp * math.sqrt(dp)
-    t = branch_t(d, pr[PR_SIGMA], pr[PR_TMIN], pr[PR_DMIN])
-    u = t * t * t - 3.0 * pr[PR_SIGMA]
-    return pr[PR_FC] + u * u
+class ForceTable(NamedTuple):
+    """The force table of :class:`mdgran.contact.ContactTable`: the cubic of interval ``i``
+    in ``w = sqrt(delta - base)`` has coefficients ``coef[i]`` (highest power first) in
+    ``w - w_i``; ``w / step`` is the interval coordinate, ``scale = 1 / step``."""
+
+    coef: np.ndarray  # [n - 1, 4]
+    base: float  # delta at w = 0 (delta_min; 0 for Hertz)
+    scale: float  # 1 / step
+    last: float  # n - 1: table coordinates at and beyond it are outside the table
+    step: float  # node spacing in w
 
 
-@njit(cache=True)
-def law_energy(d, hertz, pr):
-    """Exact contact energy V(delta) = integral_0^delta f (units eta p)."""
-    if hertz:
-        dp = max(d, 0.0)
-        return 0.4 * dp * dp * math.sqrt(dp)
-    sg, fc = pr[PR_SIGMA], pr[PR_FC]
-    t = branch_t(d, sg, pr[PR_TMIN], pr[PR_DMIN])
-    t3 = t * t * t
-    p = (0.4 * t3 * t3 * t3 * t - 4.0 * sg * t3 * t3 * t + (fc + 15.0 * sg * sg) * t3 * t
-         - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
-    return p - pr[PR_E0]
+class Params(NamedTuple):
+    """The constants of one run (units of :mod:`mdgran.chain`)."""
+
+    gap: float  # delta = x_left - x_right - gap
+    damping: float  # c
+    k1: float
+    k3: float
+    delta_off: float  # a closed contact opens when delta falls to it
+    delta_max: float  # compressions at or beyond it are outside the table (error)
+    mean_force_below: float  # closed contacts with delta below it get the mean-force kick
+    law: SchwarzConstants
+    table: ForceTable
 
 
-# ---- helpers: ``cfg = (walls, damped, k1_on, k3_on, locate, exact, hertz)`` --------------
-# The hot ones are inlined (numba IR) into each compiled variant, where ``cfg`` is a constant,
-# so the branches on it fold away; the rare-path ones take ``cfg`` at run time.
+class Beads(NamedTuple):
+    """Positions, velocities and accelerations of the beads: 1-D ``[n]`` arrays for one
+    state, or ``[2, n]`` for the two alternating buffers (:func:`buffer`)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+class EventLog(NamedTuple):
+    """Events of the run so far: time, contact index, kind (1 close, 0 open); the count is
+    ``counters.events``."""
+
+    time: np.ndarray
+    contact: np.ndarray
+    kind: np.ndarray
+
+
+class KernelState(NamedTuple):
+    """Everything the kernel updates in place besides the beads."""
+
+    closed: np.ndarray  # [m] bool: contact states
+    counters: np.ndarray  # one record of dtype COUNTERS
+    log: EventLog
+    flagged: np.ndarray  # [FLAG_CAP] contacts a pass flagged as possibly switching
+    switching: np.ndarray  # [FLAG_CAP] contacts switching at the located event time
+    chatter: np.ndarray  # [CHAT_CAP, 2] (contact, switches) at the current instant
+
+
+#: The kernel's counters and running sums (one record).
+COUNTERS = np.dtype([
+    ("current", np.int64),  # which buffer of Beads holds the current state
+    ("step", np.int64),  # steps done
+    ("events", np.int64),  # events in the log
+    ("status", np.int64),  # OK or an error code
+    ("bad_contact", np.int64),  # the contact an error concerns
+    ("flagged", np.int64),  # contacts the last pass flagged (may exceed FLAG_CAP)
+    ("chatter_count", np.int64),  # rows of KernelState.chatter in use
+    ("substeps", np.int64),  # event splits so far
+    ("d_viscous", np.float64),  # D_viscous
+    ("d_hysteresis", np.float64),  # D_hysteresis
+    ("power", np.float64),  # damping power at the current state
+    ("bad_time", np.float64),  # the time an error concerns
+    ("chatter_time", np.float64),  # the instant KernelState.chatter counts switches at
+])
+
+
+def new_state(n_contacts: int, event_capacity: int) -> KernelState:
+    """A zeroed :class:`KernelState` (no chatter instant yet)."""
+    counters = np.zeros(1, dtype=COUNTERS)
+    counters["chatter_time"] = -1.0
+    log = EventLog(np.zeros(event_capacity), np.zeros(event_capacity, dtype=np.int64),
+                   np.zeros(event_capacity, dtype=np.int8))
+    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log,
+                       np.zeros(FLAG_CAP, dtype=np.int64), np.zeros(FLAG_CAP, dtype=np.int64),
+                       np.zeros((CHAT_CAP, 2), dtype=np.int64))
+
+
+# ---- geometry and the force of a closed contact -------------------------------------------
+# The hot helpers are inlined (numba IR) into each compiled variant, where the flags are
+# constants, so the branches on them fold away; the rare-path ones take the flags at run time.
 @njit(inline="always")
-def beads(walls, j):
+def beads_of(walls, j):
     """Left and right bead of contact j (walls: j-1, j, the walls being -1 and n)."""
     if walls:
         return j - 1, j
@@ -139,76 +190,122 @@ def beads(walls, j):
 
 
 @njit(cache=True)
-def diff(walls, x, j):
+def across(walls, x, j):
     """x_left - x_right of contact j (walls at x = 0)."""
     n = x.shape[0]
-    left, right = beads(walls, j)
+    left, right = beads_of(walls, j)
     xl = x[left] if left >= 0 else 0.0
     xr = x[right] if right < n else 0.0
     return xl - xr
 
 
 @njit(inline="always")
-def spline(tab, w, wstep):
-    """Table force at table coordinate w = sqrt(delta - base) / wstep (0 <= w < n - 1): the
-    cubic of interval i = floor(w), coefficients tab[i] (highest power first) in w_i offset."""
-    i = int(w)
-    x = (w - i) * wstep
-    return ((tab[i, 0] * x + tab[i, 1]) * x + tab[i, 2]) * x + tab[i, 3]
+def buffer(beads, i):
+    """Buffer i (0 or 1) of the two alternating copies of the beads."""
+    return Beads(beads.x[i], beads.v[i], beads.a[i])
 
 
 @njit(inline="always")
-def lawf(exact, hertz, d, pr, tab):
-    """(f, ok): force f(delta) of a closed contact (table or exact law); ok is False beyond
-    the table or for a non-finite delta."""
-    if exact or hertz:  # Hertz: delta^(3/2) is cheaper than the table, and exact at 0
-        if not (d < pr[PR_DMAX]):
+def spline(table, w):
+    """Table force at table coordinate w = sqrt(delta - base) * scale (0 <= w < last): the
+    cubic of interval i = floor(w)."""
+    c = table.coef
+    i = int(w)
+    x = (w - i) * table.step
+    return ((c[i, 0] * x + c[i, 1]) * x + c[i, 2]) * x + c[i, 3]
+
+
+@njit(inline="always")
+def contact_force(exact, hertz, d, params):
+    """(f, ok): force f(delta) of a closed contact (table or exact law; Hertz always exact:
+    delta^(3/2) is cheaper than the table, and free of the spline's round-off force at 0);
+    ok is False beyond the table or for a non-finite delta."""
+    if exact or hertz:
+        if not (d < params.delta_max):
             return 0.0, False
-        return law_force(d, hertz, pr), True
-    u = d - pr[PR_BASE]
+        return law_force(d, hertz, params.law), True
+    u = d - params.table.base
     if u < 0.0:
         u = 0.0
-    w = math.sqrt(u) * pr[PR_TSCALE]
-    if not (w < pr[PR_WLIM]):
+    w = math.sqrt(u) * params.table.scale
+    if not (w < params.table.last):
         return 0.0, False
-    return spline(tab, w, pr[PR_WSTEP]), True
+    return spline(params.table, w), True
 
 
 @njit(cache=True)
-def record(j, t, kind, st, evt, evj, evk):
-    """Append event (t, contact index j, kind 1 close / 0 open) to the buffers."""
-    k = st[ST_EVN]
-    if k >= evt.shape[0]:
-        st[ST_STATUS] = EVENT_OVERFLOW
-        st[ST_BAD] = j
+def closed_force(exact, hertz, d, params):
+    """f(delta) of a closed contact as the loop evaluates it (table or exact)."""
+    f, ok = contact_force(exact, hertz, d, params)
+    return f
+
+
+@njit(inline="always")
+def fail(counters, status, j):
+    """Stop the run: error ``status`` about contact ``j``."""
+    counters.status = status
+    counters.bad_contact = j
+
+
+@njit(cache=True)
+def record_event(ks, j, t, kind):
+    """Append event (t, contact index j, kind 1 close / 0 open) to the log."""
+    counters = ks.counters[0]
+    k = counters.events
+    if k >= ks.log.time.shape[0]:
+        fail(counters, EVENT_OVERFLOW, j)
         return
-    evt[k] = t
-    evj[k] = j
-    evk[k] = kind
-    st[ST_EVN] = k + 1
+    ks.log.time[k] = t
+    ks.log.contact[k] = j
+    ks.log.kind[k] = kind
+    counters.events = k + 1
 
 
+# ---- one Verlet pass ------------------------------------------------------------------------
 @njit(cache=True)
-def quantized_switch(cfg, j, d, xo, h, t0, closed, pr, st, sc, evt, evj, evk):
+def quantized_switch(flags, params, j, d, x_old, h, t0, ks):
     """locate = False: switch contact j, whose end-of-step compression d is past its
     switching point; the event time is interpolated linearly between the step's ends."""
-    walls, hertz = cfg[0], cfg[6]
-    thr = pr[PR_DOFF] if closed[j] else 0.0
-    d0 = diff(walls, xo, j) - pr[PR_GAP]
+    closed = ks.closed
+    thr = params.delta_off if closed[j] else 0.0
+    d0 = across(flags.walls, x_old, j) - params.gap
     span = d0 - d
     frac = min(max((d0 - thr) / span if span != 0.0 else 1.0, 0.0), 1.0)
     if closed[j]:
-        sc[SC_DHYST] += law_energy(d, hertz, pr)
+        ks.counters[0].d_hysteresis += law_energy(d, flags.hertz, params.law)
         closed[j] = False
-        record(j, t0 + frac * h, 0, st, evt, evj, evk)
+        record_event(ks, j, t0 + frac * h, 0)
     else:
         closed[j] = True
-        record(j, t0 + frac * h, 1, st, evt, evj, evk)
+        record_event(ks, j, t0 + frac * h, 1)
+
+
+@njit(cache=True, inline="always")
+def bead_accelerations(f, fv, x, flags, params):
+    """A bead's acceleration from its net contact force ``f`` (and ``fv``, the same with the
+    mean-force kick near snap-off) plus the substrate terms the scene switches on."""
+    if flags.k1_on:
+        f -= params.k1 * x
+        fv -= params.k1 * x
+    if flags.k3_on:
+        f -= params.k3 * x * x * x
+        fv -= params.k3 * x * x * x
+    return f, fv
 
 
 @njit(inline="always")
-def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, sc, evt, evj, evk):
-    """One Verlet step of length h from (xo, vo, ao) into (xn, vn, an); returns the damping
+def quantized_due(closed, d, delta_off):
+    """locate = False: whether a contact with end-of-step compression d switches (strict
+    inequalities when delta_off = 0: a DMT or Hertz contact resting at delta = 0 stays)."""
+    strict = delta_off == 0.0
+    if closed:
+        return d < delta_off if strict else d <= delta_off
+    return d > 0.0 if strict else d >= 0.0
+
+
+@njit(inline="always")
+def verlet_pass(flags, params, old, new, h, t0, ks):
+    """One Verlet step of length h from the beads ``old`` into ``new``; returns the damping
     power at the end (rates from v_est).
 
     One pass over the contacts from left to right: predict the right bead of the contact,
@@ -221,14 +318,13 @@ def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, 
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    walls, damped, k1_on, k3_on, locate, exact, hertz = cfg
+    walls, hertz, exact = flags.walls, flags.hertz, flags.exact
+    counters = ks.counters[0]
+    closed, flagged = ks.closed, ks.flagged
+    xo, vo, ao = old.x, old.v, old.a
     n = xo.shape[0]
-    m = closed.shape[0]
     hh = 0.5 * h
-    gap, c, k1, k3 = pr[PR_GAP], pr[PR_C], pr[PR_K1], pr[PR_K3]
-    doff, base, tscale, wlim = pr[PR_DOFF], pr[PR_BASE], pr[PR_TSCALE], pr[PR_WLIM]
-    dmax, sing, wstep = pr[PR_DMAX], pr[PR_SING], pr[PR_WSTEP]
-    strict = doff == 0.0  # quantized DMT, Hertz: a contact resting at delta = 0 stays
+    gap, c, doff = params.gap, params.damping, params.delta_off
     nflag = 0
     power = 0.0
     # left bead of the current contact: (x, v_half, v_est); the wall for walls
@@ -239,7 +335,7 @@ def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, 
         ve_c = vh_c + hh * ao[0]
     f_l, fv_l = 0.0, 0.0  # force of the contact left of that bead (Fv: for the kick)
     rshift = 0 if walls else 1  # right bead of contact j
-    for j in range(m):
+    for j in range(closed.shape[0]):
         rb = j + rshift
         x_r, vh_r, ve_r = 0.0, 0.0, 0.0
         if rb < n:
@@ -249,41 +345,19 @@ def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, 
             ve_r = vh_r + hh * a_r
         d = x_c - x_r - gap
         r = ve_c - ve_r
-        if not locate:
-            if closed[j]:
-                go = d < doff if strict else d <= doff
-            else:
-                go = d > 0.0 if strict else d >= 0.0
-            if go:
-                quantized_switch(cfg, j, d, xo, h, t0, closed, pr, st, sc, evt, evj, evk)
+        if not flags.locate and quantized_due(closed[j], d, doff):
+            quantized_switch(flags, params, j, d, xo, h, t0, ks)
         f_r, fv_r = 0.0, 0.0
         if closed[j]:
-            if hertz:  # exact: cheaper than the table, and no round-off force at delta = 0
-                if not (d < dmax):
-                    st[ST_STATUS] = OUT_OF_TABLE
-                    st[ST_BAD] = j
-                dp = d if d > 0.0 else 0.0
-                f_r = dp * math.sqrt(dp)
-            elif exact:
-                if not (d < dmax):
-                    st[ST_STATUS] = OUT_OF_TABLE
-                    st[ST_BAD] = j
-                f_r = law_force(d, hertz, pr)
-            else:
-                u = d - base
-                if u < 0.0:
-                    u = 0.0
-                w = math.sqrt(u) * tscale
-                if not (w < wlim):
-                    st[ST_STATUS] = OUT_OF_TABLE
-                    st[ST_BAD] = j
-                    w = 0.0
-                f_r = spline(tab, w, wstep)
+            f_r, ok = contact_force(exact, hertz, d, params)
+            if not ok:
+                fail(counters, OUT_OF_TABLE, j)
             fv_r = f_r
-            if d < sing:  # near snap-off: mean-force kick
-                d0 = diff(walls, xo, j) - gap
-                fv_r = 2.0 * law_mean_force(d0, d, pr) - law_force_at(exact, hertz, d0, pr, tab)
-            if damped:
+            if d < params.mean_force_below:  # near snap-off: mean-force kick
+                d0 = across(walls, xo, j) - gap
+                fv_r = (2.0 * schwarz_mean_force(d0, d, params.law)
+                        - closed_force(exact, hertz, d0, params))
+            if flags.damped:
                 f_r += c * r
                 fv_r += c * r
                 power += c * r * r
@@ -292,67 +366,47 @@ def verlet_pass(cfg, xo, vo, ao, xn, vn, an, closed, h, t0, pr, tab, flags, st, 
         else:
             g = -d
             gd = -r
-        if locate:
+        if flags.locate:
             # a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
             if g < 0.0 or g < 0.5 * h * gd:
-                if nflag < flags.shape[0]:
-                    flags[nflag] = j
+                if nflag < flagged.shape[0]:
+                    flagged[nflag] = j
                 nflag += 1
         if rb >= 1:  # finish the left bead
-            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, k1_on, k1, k3_on, k3)
-            xn[rb - 1] = x_c
-            an[rb - 1] = a
-            vn[rb - 1] = vh_c + hh * av
+            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, flags, params)
+            new.x[rb - 1] = x_c
+            new.a[rb - 1] = a
+            new.v[rb - 1] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls:  # the last bead has no contact on its right
-        a, av = bead_accelerations(f_l, fv_l, x_c, k1_on, k1, k3_on, k3)
-        xn[n - 1] = x_c
-        an[n - 1] = a
-        vn[n - 1] = vh_c + hh * av
-    st[ST_NFLAG] = nflag
+        a, av = bead_accelerations(f_l, fv_l, x_c, flags, params)
+        new.x[n - 1] = x_c
+        new.a[n - 1] = a
+        new.v[n - 1] = vh_c + hh * av
+    counters.flagged = nflag
     return power
 
 
-@njit(cache=True, inline="always")
-def bead_accelerations(f, fv, x, k1_on, k1, k3_on, k3):
-    """A bead's acceleration from its net contact force ``f`` (and ``fv``, the same with the
-    mean-force kick near snap-off) plus the substrate terms the scene switches on."""
-    if k1_on:
-        f -= k1 * x
-        fv -= k1 * x
-    if k3_on:
-        f -= k3 * x * x * x
-        fv -= k3 * x * x * x
-    return f, fv
-
-
+# ---- event location and switching (rare path; flags at run time) --------------------------
 @njit(cache=True)
-def law_force_at(exact, hertz, d, pr, tab):
-    """f(delta) of a closed contact as the loop evaluates it (table or exact)."""
-    f, ok = lawf(exact, hertz, d, pr, tab)
-    return f
-
-
-# ---- event location and switching (rare path; cfg at run time) --------------------------
-@njit(cache=True)
-def gfun(walls, j, x, v, a, closed, pr):
+def event_function(walls, params, j, beads, closed):
     """(g, g', g'') of contact j in its current state (g > 0 inside the state)."""
-    d = diff(walls, x, j) - pr[PR_GAP]
-    r = diff(walls, v, j)
-    q = diff(walls, a, j)
+    d = across(walls, beads.x, j) - params.gap
+    r = across(walls, beads.v, j)
+    q = across(walls, beads.a, j)
     if closed[j]:
-        return d - pr[PR_DOFF], r, q
+        return d - params.delta_off, r, q
     return -d, -r, -q
 
 
 @njit(cache=True)
-def first_root(walls, j, xo, vo, ao, xn, closed, h, pr):
+def first_root(walls, params, j, old, x_new, closed, h):
     """First s in [0, h] where g(s) = g0 + s g0' + s^2/2 g0'' falls to min(g0, 0), or -1."""
-    g0, b, q = gfun(walls, j, xo, vo, ao, closed, pr)
+    g0, b, q = event_function(walls, params, j, old, closed)
     c = 0.5 * q
-    d1 = diff(walls, xn, j) - pr[PR_GAP]
-    g1 = d1 - pr[PR_DOFF] if closed[j] else -d1
+    d1 = across(walls, x_new, j) - params.gap
+    g1 = d1 - params.delta_off if closed[j] else -d1
     if g0 <= 0.0:  # on its switching point (left alone: moving inward): event if it goes out
         if b < 0.0 or g0 < -STATE_TOL:  # moving out, or beyond it (the state invariant)
             return 0.0
@@ -381,136 +435,148 @@ def first_root(walls, j, xo, vo, ao, xn, closed, h, pr):
 
 
 @njit(cache=True)
-def locate_events(walls, xo, vo, ao, xn, closed, h, tol, pr, flags, swl, st):
+def locate_events(walls, params, old, x_new, h, tol, ks):
     """Earliest root te among the flagged contacts, and the contacts switching with it (into
-    swl): returns (te, count), te = -1 if none."""
-    nf = st[ST_NFLAG]
-    scan_all = nf > flags.shape[0]
+    ks.switching): returns (te, count), te = -1 if none."""
+    counters = ks.counters[0]
+    closed, flagged, switching = ks.closed, ks.flagged, ks.switching
+    nf = counters.flagged
+    scan_all = nf > flagged.shape[0]
     cnt = closed.shape[0] if scan_all else nf
     te = -1.0
     for k in range(cnt):
-        j = k if scan_all else flags[k]
-        s = first_root(walls, j, xo, vo, ao, xn, closed, h, pr)
+        j = k if scan_all else flagged[k]
+        s = first_root(walls, params, j, old, x_new, closed, h)
         if s >= 0.0 and (te < 0.0 or s < te):
             te = s
     if te < 0.0:
         return te, 0
     ns = 0
     for k in range(cnt):
-        j = k if scan_all else flags[k]
-        s = first_root(walls, j, xo, vo, ao, xn, closed, h, pr)
+        j = k if scan_all else flagged[k]
+        s = first_root(walls, params, j, old, x_new, closed, h)
         if s >= 0.0 and s <= te + tol:
-            if ns >= swl.shape[0]:
-                st[ST_STATUS] = EVENT_OVERFLOW
-                st[ST_BAD] = j
+            if ns >= switching.shape[0]:
+                fail(counters, EVENT_OVERFLOW, j)
                 return te, ns
-            swl[ns] = j
+            switching[ns] = j
             ns += 1
     return te, ns
 
 
 @njit(cache=True)
-def switch(cfg, j, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat):
-    """Switch contact j at time t in state (x, v, a): hysteresis loss V(delta) on opening,
+def count_switch(ks, j, t):
+    """Chatter guard: count the switches of contact j at the instant t; more than
+    MAX_SWITCHES stop the run."""
+    counters = ks.counters[0]
+    chat = ks.chatter
+    if abs(t - counters.chatter_time) > SIMULTANEOUS * (1.0 + abs(t)):
+        counters.chatter_time = t
+        counters.chatter_count = 0
+    nc = counters.chatter_count
+    for k in range(nc):
+        if chat[k, 0] == j:
+            chat[k, 1] += 1
+            if chat[k, 1] > MAX_SWITCHES:
+                fail(counters, CHATTER, j)
+            return
+    if nc < chat.shape[0]:
+        chat[nc, 0] = j
+        chat[nc, 1] = 1
+        counters.chatter_count = nc + 1
+
+
+@njit(cache=True)
+def switch(flags, params, j, t, beads, ks):
+    """Switch contact j at time t in state ``beads``: hysteresis loss V(delta) on opening,
     the event, the change of force on its two beads and of the damping power; chatter guard."""
-    walls, damped, exact, hertz = cfg[0], cfg[1], cfg[5], cfg[6]
+    counters = ks.counters[0]
+    closed = ks.closed
+    x, a = beads.x, beads.a
     n = x.shape[0]
-    d = diff(walls, x, j) - pr[PR_GAP]
-    r = diff(walls, v, j)
+    c = params.damping
+    d = across(flags.walls, x, j) - params.gap
+    r = across(flags.walls, beads.v, j)
     f_old = 0.0
     f_new = 0.0
     if closed[j]:
-        f_old, ok = lawf(exact, hertz, d, pr, tab)
-        if damped:
-            f_old += pr[PR_C] * r
-            sc[SC_POWER] -= pr[PR_C] * r * r
-        sc[SC_DHYST] += law_energy(d, hertz, pr)
+        f_old, ok = contact_force(flags.exact, flags.hertz, d, params)
+        if flags.damped:
+            f_old += c * r
+            counters.power -= c * r * r
+        counters.d_hysteresis += law_energy(d, flags.hertz, params.law)
         closed[j] = False
-        record(j, t, 0, st, evt, evj, evk)
+        record_event(ks, j, t, 0)
     else:
         closed[j] = True
-        record(j, t, 1, st, evt, evj, evk)
-        f_new, ok = lawf(exact, hertz, d, pr, tab)
+        record_event(ks, j, t, 1)
+        f_new, ok = contact_force(flags.exact, flags.hertz, d, params)
         if not ok:
-            st[ST_STATUS] = OUT_OF_TABLE
-            st[ST_BAD] = j
-        if damped:
-            f_new += pr[PR_C] * r
-            sc[SC_POWER] += pr[PR_C] * r * r
-    left, right = beads(walls, j)
+            fail(counters, OUT_OF_TABLE, j)
+        if flags.damped:
+            f_new += c * r
+            counters.power += c * r * r
+    left, right = beads_of(flags.walls, j)
     df = f_new - f_old
     if left >= 0:
         a[left] -= df
     if right < n:
         a[right] += df
-    # chatter guard: count the switches of each contact at this instant
-    if abs(t - sc[SC_CHATT]) > SIMULTANEOUS * (1.0 + abs(t)):
-        sc[SC_CHATT] = t
-        st[ST_CHATN] = 0
-    nc = st[ST_CHATN]
-    for k in range(nc):
-        if chat[k, 0] == j:
-            chat[k, 1] += 1
-            if chat[k, 1] > MAX_SWITCHES:
-                st[ST_STATUS] = CHATTER
-                st[ST_BAD] = j
-            return
-    if nc < chat.shape[0]:
-        chat[nc, 0] = j
-        chat[nc, 1] = 1
-        st[ST_CHATN] = nc + 1
+    count_switch(ks, j, t)
 
 
 @njit(cache=True)
-def settle(cfg, js, nj, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat):
-    """Switch at once every contact of js[:nj] on or over its switching point and moving
-    outward (g <= 0, g' < 0), or beyond it by more than STATE_TOL, until none is (the
+def settle(flags, params, contacts, count, t, beads, ks):
+    """Switch at once every contact of contacts[:count] on or over its switching point and
+    moving outward (g <= 0, g' < 0), or beyond it by more than STATE_TOL, until none is (the
     reference's rule)."""
+    counters = ks.counters[0]
     while True:
         moved = False
-        for k in range(nj):
-            j = js[k]
-            g, gd, _ = gfun(cfg[0], j, x, v, a, closed, pr)
+        for k in range(count):
+            j = contacts[k]
+            g, gd, _ = event_function(flags.walls, params, j, beads, ks.closed)
             if g < -STATE_TOL or (g <= 0.0 and gd < 0.0):
-                switch(cfg, j, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat)
+                switch(flags, params, j, t, beads, ks)
                 moved = True
-                if st[ST_STATUS] != OK:
+                if counters.status != OK:
                     return
         if not moved:
             return
 
 
 @njit(cache=True)
-def settle_all(cfg, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat):
+def settle_all(flags, params, t, beads, ks):
     """The initial settle, over every contact."""
-    m = closed.shape[0]
-    settle(cfg, np.arange(m), m, t, x, v, a, closed, pr, tab, st, sc, evt, evj, evk, chat)
+    m = ks.closed.shape[0]
+    settle(flags, params, np.arange(m), m, t, beads, ks)
 
 
 @njit(cache=True)
-def init_acc(cfg, x, v, a, closed, pr, tab, st):
+def init_acc(flags, params, beads, ks):
     """a = a(x, v) for the current contact states; returns the damping power."""
-    walls, damped, k1_on, k3_on, exact, hertz = cfg[0], cfg[1], cfg[2], cfg[3], cfg[5], cfg[6]
+    x, v, a = beads
+    closed = ks.closed
     n = x.shape[0]
     power = 0.0
     for i in range(n):
         a[i] = 0.0
-        if k1_on:
-            a[i] -= pr[PR_K1] * x[i]
-        if k3_on:
-            a[i] -= pr[PR_K3] * x[i] * x[i] * x[i]
+        if flags.k1_on:
+            a[i] -= params.k1 * x[i]
+        if flags.k3_on:
+            a[i] -= params.k3 * x[i] * x[i] * x[i]
     for j in range(closed.shape[0]):
         if not closed[j]:
             continue
-        f, ok = lawf(exact, hertz, diff(walls, x, j) - pr[PR_GAP], pr, tab)
+        f, ok = contact_force(flags.exact, flags.hertz,
+                              across(flags.walls, x, j) - params.gap, params)
         if not ok:
-            st[ST_STATUS] = OUT_OF_TABLE
-            st[ST_BAD] = j
-        if damped:
-            r = diff(walls, v, j)
-            f += pr[PR_C] * r
-            power += pr[PR_C] * r * r
-        left, right = beads(walls, j)
+            fail(ks.counters[0], OUT_OF_TABLE, j)
+        if flags.damped:
+            r = across(flags.walls, v, j)
+            f += params.damping * r
+            power += params.damping * r * r
+        left, right = beads_of(flags.walls, j)
         if left >= 0:
             a[left] -= f
         if right < n:
@@ -518,29 +584,44 @@ def init_acc(cfg, x, v, a, closed, pr, tab, st):
     return power
 
 
-# ---- the stepping loop, one compiled variant per cfg ---------------------------------------
+# ---- the stepping loop, one compiled variant per Flags ---------------------------------------
 @njit(inline="always")
-def _advance(cfg, nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt, evj, evk,
-             chat):
-    locate = cfg[4]
+def switch_all(flags, params, count, t, beads, ks):
+    """Switch the located contacts ks.switching[:count] at t, then settle them."""
+    for k in range(count):
+        switch(flags, params, ks.switching[k], t, beads, ks)
+    settle(flags, params, ks.switching, count, t, beads, ks)
+
+
+@njit(inline="always")
+def advance_steps(flags, params, buffers, ks, nsteps, dt):
+    """Up to nsteps steps of dt from buffers[counters.current]; each step is split at the
+    events located inside it (the pass is redone to the earliest event time te, the
+    contacts switch, the rest of the step follows in the new state).  Stops early on an
+    error or when the event log is half full (counters.status).
+
+    (One function: with the step in a function of its own, inlined, the loop ran 30 % slower
+    on a 20-bead chain.)"""
+    counters = ks.counters[0]
+    copies = (buffer(buffers, 0), buffer(buffers, 1))
     for _ in range(nsteps):
-        if st[ST_EVN] > evt.shape[0] // 2:
-            st[ST_STATUS] = EVENTS_FULL
+        if counters.events > ks.log.time.shape[0] // 2:
+            counters.status = EVENTS_FULL
             return
-        t0 = st[ST_STEP] * dt
+        t0 = counters.step * dt
         tol = SIMULTANEOUS * (1.0 + abs(t0))
         done = 0.0  # part of the step integrated so far
         h = dt
         redo = 0  # > 0: this pass is the step up to `redo` simultaneous events
         nsub = 0
         while True:
-            o = st[ST_CUR]
+            o = counters.current
             w = 1 - o
-            st[ST_NFLAG] = 0
-            p1 = verlet_pass(cfg, X[o], V[o], A[o], X[w], V[w], A[w], closed, h, t0 + done, pr, tab,
-                       flags, st, sc, evt, evj, evk)
-            if st[ST_STATUS] != OK:
-                sc[SC_BADT] = t0 + done + h
+            old, new = copies[o], copies[w]
+            counters.flagged = 0
+            p1 = verlet_pass(flags, params, old, new, h, t0 + done, ks)
+            if counters.status != OK:
+                counters.bad_time = t0 + done + h
                 return
             ns = 0
             te = -1.0
@@ -548,93 +629,80 @@ def _advance(cfg, nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt,
             if redo > 0:  # this pass ends on the events
                 ns, te = redo, h
             else:
-                if locate and st[ST_NFLAG] > 0:
-                    te, ns = locate_events(cfg[0], X[o], V[o], A[o], X[w], closed, h, tol, pr,
-                                           flags, swl, st)
-                    if st[ST_STATUS] != OK:
-                        sc[SC_BADT] = t0 + done
+                if flags.locate and counters.flagged > 0:
+                    te, ns = locate_events(flags.walls, params, old, new.x, h, tol, ks)
+                    if counters.status != OK:
+                        counters.bad_time = t0 + done
                         return
                 last = ns == 0 or te >= h - tol
             if last or redo > 0:  # keep this pass
-                sc[SC_DVISC] += 0.5 * h * (sc[SC_POWER] + p1)
-                sc[SC_POWER] = p1
-                st[ST_CUR] = w
+                counters.d_viscous += 0.5 * h * (counters.power + p1)
+                counters.power = p1
+                counters.current = w
             if ns == 0:
                 break
             if redo == 0 and not last and te > 0.0:
                 redo, h = ns, te  # step again, up to the event
                 continue
             tev = t0 + dt if last else t0 + done + te
-            c = st[ST_CUR]
-            for k in range(ns):
-                switch(cfg, swl[k], tev, X[c], V[c], A[c], closed, pr, tab, st, sc, evt, evj,
-                       evk, chat)
-            settle(cfg, swl, ns, tev, X[c], V[c], A[c], closed, pr, tab, st, sc, evt, evj,
-                   evk, chat)
-            st[ST_SUBSTEPS] += 1
+            switch_all(flags, params, ns, tev, copies[counters.current], ks)
+            counters.substeps += 1
             nsub += 1
             if nsub > MAX_SUBSTEPS:
-                st[ST_STATUS] = TOO_MANY_SUBSTEPS
-                st[ST_BAD] = swl[0]
-            if st[ST_STATUS] != OK:
-                sc[SC_BADT] = tev
+                fail(counters, TOO_MANY_SUBSTEPS, ks.switching[0])
+            if counters.status != OK:
+                counters.bad_time = tev
                 return
             if last:
                 break
             done += te
             h = dt - done
             redo = 0
-        st[ST_STEP] += 1
+        counters.step += 1
 
 
-@njit(cache=True)
-def law_mean_force(d0, d1, pr):
-    """Mean force over the compression interval, (V(d1) - V(d0)) / (d1 - d0) (Schwarz).
+# ---- the entry point ----------------------------------------------------------------------
+# A named tuple crosses from Python into compiled code about 1 us slower than a plain one (numba
+# types it in Python), and the fast backend calls the loop once per frame; so the records cross
+# as plain tuples (`plain`) and are named again on the compiled side (`named_*`).
+def plain(record):
+    """A record (named tuples, nested) as plain tuples, for :func:`get_kernel`'s loop."""
+    if isinstance(record, tuple):
+        return tuple(plain(field) for field in record)
+    return record
 
-    In the branch parameter t it is the mean of f(t) weighted by delta'(t) = 4 (t^3 - sigma)
-    >= 0 over [t0, t1]; f delta' is a polynomial of degree 9, so 5-point Gauss-Legendre is
-    exact, and there is no cancellation when d1 - d0 is small.
-    """
-    sg, tm, fc = pr[PR_SIGMA], pr[PR_TMIN], pr[PR_FC]
-    t0 = branch_t(d0, sg, tm, pr[PR_DMIN])
-    t1 = branch_t(d1, sg, tm, pr[PR_DMIN])
-    mid, half = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
-    num = 0.0
-    den = 0.0
-    for k in range(5):
-        tau = mid + half * GL_X[k]
-        t3 = tau * tau * tau
-        wk = GL_W[k] * (t3 - sg)
-        u = t3 - 3.0 * sg
-        num += wk * (fc + u * u)
-        den += wk
-    if den <= 0.0:
-        u = t0 * t0 * t0 - 3.0 * sg
-        return fc + u * u
-    return num / den
+
+@njit(inline="always")
+def named_params(p):
+    """:class:`Params` from ``plain(params)``."""
+    return Params(p[0], p[1], p[2], p[3], p[4], p[5], p[6], SchwarzConstants(*p[7]),
+                  ForceTable(*p[8]))
+
+
+@njit(inline="always")
+def named_state(k):
+    """:class:`KernelState` from ``plain(ks)``."""
+    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], k[5])
 
 
 _KERNELS: dict = {}
 
 
-def get_kernel(walls: bool, damped: bool, k1_on: bool, k3_on: bool, locate: bool,
-               exact: bool, hertz: bool):
-    """``(cfg, advance)``: the configuration tuple and the compiled stepping loop
-    ``advance(nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt, evj, evk, chat)``
-    for one variant (compiled on first use, then cached on disk by numba)."""
-    cfg = (bool(walls), bool(damped), bool(k1_on), bool(k3_on), bool(locate), bool(exact),
-           bool(hertz))
-    if cfg not in _KERNELS:
-        _KERNELS[cfg] = (cfg, _make_advance(cfg))
-    return _KERNELS[cfg]
+def get_kernel(flags: Flags):
+    """The compiled stepping loop of one variant (compiled on first use, then cached on disk by
+    numba), ``advance(plain(params), plain(buffers), plain(ks), nsteps, dt)``: up to ``nsteps``
+    steps of ``dt`` from ``buffers`` (:class:`Beads` of ``[2, n]`` arrays) at
+    ``counters.current``; stops early on an error or when the event log is half full
+    (``counters.status``)."""
+    flags = Flags(*(bool(f) for f in flags))
+    if flags not in _KERNELS:
+        _KERNELS[flags] = _make_advance(flags)
+    return _KERNELS[flags]
 
 
-def _make_advance(cfg):
+def _make_advance(flags):
     @njit(cache=True)
-    def advance(nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt, evj, evk, chat):
-        """Advance up to nsteps steps of dt from the state in (X, V, A)[st[ST_CUR]]; stops
-        early on an error or when the event buffer is half full (st[ST_STATUS])."""
-        _advance(cfg, nsteps, dt, X, V, A, closed, pr, tab, flags, swl, st, sc, evt, evj,
-                 evk, chat)
+    def advance(params, buffers, ks, nsteps, dt):
+        advance_steps(flags, named_params(params), Beads(*buffers), named_state(ks), nsteps, dt)
 
     return advance

@@ -1,0 +1,67 @@
+"""The compiled scalar law (mdgran.contact_scalar, the fast kernel's) against the numpy law of
+mdgran.contact, which evaluates the same polynomials independently (numpy's ``**`` instead of
+products), and against the integral identities the kernel relies on."""
+
+import numpy as np
+import pytest
+
+from mdgran.contact import ContactLaw
+from mdgran.contact_scalar import (branch_t, hertz_energy, hertz_force, law_energy, law_force,
+                                   schwarz_constants, schwarz_energy, schwarz_force,
+                                   schwarz_mean_force)
+
+LAWS = [ContactLaw("schwarz", fc) for fc in (-2.0, -1.85182, -1.5)] + [
+    ContactLaw("schwarz", -1.65773, "force")]
+
+
+def compressions(law):
+    return np.concatenate([law.delta_min + np.logspace(-14, 0, 40), np.linspace(0.0, 60.0, 61)])
+
+
+@pytest.mark.parametrize("law", LAWS, ids=lambda law: f"{law.fc}-{law.snap_off}")
+def test_scalar_law_matches_numpy_law(law):
+    """Force and energy of the scalar law equal ContactLaw's to round-off (the two evaluate
+    the polynomials in t differently, so they may differ in the last bits only)."""
+    k = schwarz_constants(law)
+    for d in compressions(law):
+        f, e = schwarz_force(d, k), schwarz_energy(d, k)
+        assert f == pytest.approx(float(law.force(d)), rel=1e-13, abs=1e-13)
+        assert e == pytest.approx(float(law.energy(d)), rel=1e-12, abs=1e-13)
+        assert law_force(d, False, k) == f and law_energy(d, False, k) == e
+
+
+@pytest.mark.parametrize("law", LAWS, ids=lambda law: f"{law.fc}-{law.snap_off}")
+def test_branch_t_solves_the_branch_equation(law):
+    """t^4 - 4 sigma t = delta on the stable branch t >= t_min; t_min below delta_min."""
+    for d in compressions(law):
+        t = branch_t(d, law.sigma, law.t_min, law.delta_min)
+        assert t >= law.t_min
+        assert t**4 - 4.0 * law.sigma * t == pytest.approx(d, rel=1e-13, abs=1e-13)
+        assert float(law.t_of_delta(d)) == t  # contact.py inverts with this same function
+    assert branch_t(law.delta_min - 1.0, law.sigma, law.t_min, law.delta_min) == law.t_min
+
+
+@pytest.mark.parametrize("law", LAWS[:3], ids=lambda law: str(law.fc))
+def test_mean_force_is_the_energy_difference_quotient(law):
+    """schwarz_mean_force(d0, d1) = (V(d1) - V(d0)) / (d1 - d0) (Gauss-Legendre, exact for the
+    degree-9 polynomial), and f(d) as d1 -> d0."""
+    k = schwarz_constants(law)
+    lo = law.delta_min
+    for d0, d1 in [(lo, lo + 0.05), (lo + 1e-9, lo + 0.1), (lo + 0.02, 0.3), (0.5, 2.0)]:
+        expected = (float(law.energy(d1)) - float(law.energy(d0))) / (d1 - d0)
+        assert schwarz_mean_force(d0, d1, k) == pytest.approx(expected, rel=1e-10)
+        assert schwarz_mean_force(d1, d0, k) == pytest.approx(expected, rel=1e-10)
+    d = lo + 0.01
+    assert schwarz_mean_force(d, d, k) == pytest.approx(float(law.force(d)), rel=1e-14)
+
+
+def test_hertz_scalar_law():
+    law = ContactLaw("hertz")
+    k = schwarz_constants(law)
+    for d in (-1.0, 0.0, 1e-12, 0.3, 4.0, 80.0):
+        assert hertz_force(d) == float(law.force(d))  # the same two operations
+        assert hertz_energy(d) == float(law.energy(d))
+        assert hertz_force(d) == pytest.approx(max(d, 0.0) ** 1.5, rel=1e-15)
+        assert hertz_energy(d) == pytest.approx(0.4 * max(d, 0.0) ** 2.5, rel=1e-15)
+        assert law_force(d, True, k) == hertz_force(d)
+        assert law_energy(d, True, k) == hertz_energy(d)
