@@ -63,7 +63,7 @@ def main(argv=None):
                 res = run(sc, backend, raise_errors=False)
                 tr = res.trajectory
                 scale = max(sc.impulse_energy, float(tr.ledger["kinetic_energy"].max()))
-                led = float(np.abs(tr.ledger["total_energy"] - tr.e0).max() / scale)
+                led = float(np.abs(tr.ledger_error(scale)).max())
                 bound = BOUND.get(backend, 1e-2)
                 if backend == "reference" and name in CASE_BOUND:
                     bound = CASE_BOUND[name](float(sc.data["run"]["duration"]))

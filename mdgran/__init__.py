@@ -9,7 +9,7 @@ The Python API (docs/python_api.md)::
     import mdgran
     mdgran.scenes()                                   # built-in scene names
     res = mdgran.run("micro-star", "fast", out="ms.h5", set={"run.duration": 50.0})
-    traj = mdgran.read("ms.h5")                       # a Trajectory
+    rec = mdgran.read("ms.h5")                        # a Run: frames, states, scene, status
 
 ``import mdgran`` imports nothing heavy: the names below are loaded on first use (numpy, scipy
 and h5py come with them), so that ``mdgran scenes`` starts fast.
@@ -27,7 +27,8 @@ _LAZY = {
     "RunResult": ("simulation", "RunResult"),
     "BackendUnavailable": ("simulation", "BackendUnavailable"),
     "IntegrationError": ("backends.base", "IntegrationError"),
-    "Trajectory": ("trajectory", "Trajectory"),
+    "Run": ("run_record", "Run"),
+    "Trajectory": ("run_record", "Run"),  # its former name (mdgran 0.1), kept for old code
 }
 
 __all__ = ["__version__", *_LAZY]

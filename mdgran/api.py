@@ -6,7 +6,7 @@ Example::
 
     res = mdgran.run("micro-star", "reference", out="ms.h5", set={"run.duration": 50.0})
     print(res)                        # RunResult(scene='micro-star', backend='reference', ...)
-    traj = mdgran.read("ms.h5")       # the same Trajectory, read back from the H5MD file
+    rec = mdgran.read("ms.h5")        # the same Run record, read back from the H5MD file
 
 Everything is nondimensional (physics.md section 1): length ``p``, force ``eta = pi R w``,
 time ``1/q``, bead mass 1, energy ``eta p``.  Errors name this module's parameters (``scene``,
@@ -40,9 +40,10 @@ def scenes() -> list:
 
 
 def read(path):
-    """The :class:`~mdgran.trajectory.Trajectory` stored in an mdgran H5MD file ``path``
-    (written by ``mdgran.run(..., out=path)`` or ``mdgran run --out path``)."""
-    from .trajectory import read_h5
+    """The :class:`~mdgran.run_record.Run` stored in an mdgran H5MD file ``path`` (written by
+    ``mdgran.run(..., out=path)`` or ``mdgran run --out path``): frames, contact states,
+    ledger, events, the stored scene and status."""
+    from .run_record import read_h5
 
     return read_h5(os.fspath(path))
 
@@ -140,7 +141,8 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
     * ``set``: overrides of scene keys, ``{"run.duration": 50.0, "impulse.velocity": 5}``
       (what ``--set`` does on the command line); also nested or as (key, value) pairs.
     * ``progress``: a progress bar on stderr for runs longer than 2 s.
-    * ``keep`` (default True): keep the frames in memory as ``result.trajectory``.
+    * ``keep`` (default True): keep the run in memory as ``result.trajectory`` (a
+      :class:`~mdgran.run_record.Run`).
     * ``raise_errors`` (default True): a run that fails (blow-up, stalled step) raises
       :class:`~mdgran.backends.base.IntegrationError` after writing its frames; False returns
       the result with ``status = "failed: ..."``.

@@ -16,22 +16,6 @@ import numpy as np
 from .chain import model_from_scene
 
 
-def contact_states(traj, model) -> np.ndarray:
-    """[F, n_contacts] bool: the model's initial states (all closed, or all open with an
-    initial gap), then the events replayed (the t = 0 settle included); a frame at time t
-    includes the events at times <= t."""
-    index = {int(c): k for k, c in enumerate(model.contact_numbers)}
-    states = np.empty((len(traj.time), model.n_contacts), dtype=bool)
-    cur = model.initial_state(1, 0.0)[2].copy()
-    j = 0
-    for f, t in enumerate(traj.time):
-        while j < len(traj.ev_time) and traj.ev_time[j] <= t:
-            cur[index[int(traj.ev_contact[j])]] = bool(traj.ev_kind[j])
-            j += 1
-        states[f] = cur
-    return states
-
-
 def paper_wire_k3(scene) -> float | None:
     """Nondimensional cubic coefficient of the paper's wire for this scene's K1 (None without a
     material)."""
@@ -47,14 +31,17 @@ def paper_wire_k3(scene) -> float | None:
     return k3_si * sc.p**2 / sc.stiffness
 
 
-def term_budget(traj, scene) -> dict:
+def term_budget(run) -> dict:
+    """The budget of :class:`~mdgran.run_record.Run` ``run`` (module docstring), from its
+    stored frames and contact states."""
+    scene = run.scene
     m = model_from_scene(scene)
     e_imp = scene.impulse_energy or 1.0
-    closed = contact_states(traj, m)
-    x, v = traj.x, traj.v
-    f_law = np.zeros(len(traj.time))
-    f_damp = np.zeros(len(traj.time))
-    for k in range(len(traj.time)):
+    closed = run.closed
+    x, v = run.x, run.v
+    f_law = np.zeros(len(run.time))
+    f_damp = np.zeros(len(run.time))
+    for k in range(len(run.time)):
         delta = m.compressions(x[k])
         fl = np.where(closed[k], m.law.force(delta), 0.0)
         f_law[k] = np.abs(m._apply(fl)).max()
@@ -65,9 +52,9 @@ def term_budget(traj, scene) -> dict:
     k3 = m.k3 if m.k3 else paper_wire_k3(scene)
     terms = {
         "contact": {"on": True, "max_force": float(f_law.max()),
-                    "max_energy": float(np.abs(traj.ledger["contact_energy"]).max())},
+                    "max_energy": float(np.abs(run.ledger["contact_energy"]).max())},
         "damping": {"on": bool(m.damping), "max_force": float(f_damp.max()),
-                    "max_energy": float(traj.ledger["dissipated_viscous"][-1])},
+                    "max_energy": float(run.ledger["dissipated_viscous"][-1])},
         "substrate_linear": {"on": bool(m.k1), "max_force": float(m.k1 * xmax),
                              "max_energy": float(0.5 * m.k1 * np.max(np.sum(x * x, axis=1)))},
         "substrate_cubic": {"on": bool(m.k3), "k3": k3,

@@ -25,6 +25,64 @@ import numpy as np
 from .contact import ContactLaw
 
 
+# ---- contact numbering and states: the one place that knows them -----------------------------
+def n_contacts(n: int, walls: bool = True) -> int:
+    """Number of contacts of a chain of ``n`` moving beads: ``n + 1`` between fixed walls,
+    ``n - 1`` for a free chain."""
+    return n + 1 if walls else n - 1
+
+
+def first_contact(walls: bool = True) -> int:
+    """Contract number of the first contact: 1 (wall-bead 1) with walls, 2 (bead 1-bead 2)
+    for a free chain."""
+    return 1 if walls else 2
+
+
+def contact_numbers(n: int, walls: bool = True) -> np.ndarray:
+    """Contract numbers of the contacts, in column order: ``1..n+1`` with walls, ``2..n`` for a
+    free chain (contact ``i`` joins bead ``i-1`` and bead ``i``; beads 0 and n+1 are walls)."""
+    return first_contact(walls) + np.arange(n_contacts(n, walls))
+
+
+def contact_columns(contacts, walls: bool = True) -> np.ndarray:
+    """Column (0-based, the order of :func:`contact_numbers`) of each contract number in
+    ``contacts``."""
+    return np.asarray(contacts, dtype=np.int64) - first_contact(walls)
+
+
+def initial_states(n: int, walls: bool = True, initial_gap: float = 0.0) -> np.ndarray:
+    """The paper's initial contact states [n_contacts]: every contact closed at ``delta = 0``,
+    or every contact open when the scene has an initial gap (``initial_gap > 0``)."""
+    return np.full(n_contacts(n, walls), float(initial_gap) <= 0.0)
+
+
+def replay_states(initial, ev_time, ev_contact, ev_kind, times, walls: bool = True
+                  ) -> np.ndarray:
+    """Contact states at each of ``times`` [F] (bool ``[F, n_contacts]``, True = closed),
+    rebuilt from the events: the ``initial`` states [n_contacts], then every event with
+    ``ev_time <= t`` applied in time order (events at equal times in list order, the last
+    one winning).  ``ev_contact``: contract numbers; ``ev_kind``: 1 close, 0 open."""
+    init = np.asarray(initial, dtype=bool)
+    times = np.asarray(times, dtype=float)
+    ev_time = np.asarray(ev_time, dtype=float)
+    ev_kind = np.asarray(ev_kind).astype(bool)
+    cols = contact_columns(ev_contact, walls)
+    bad = (cols < 0) | (cols >= len(init))
+    if bad.any():
+        first, last = first_contact(walls), first_contact(walls) + len(init) - 1
+        raise ValueError(f"ev_contact: contact numbers of this chain are {first}..{last}, not "
+                         f"{int(np.asarray(ev_contact)[bad][0])}")
+    states = np.tile(init, (len(times), 1))
+    order = np.argsort(ev_time, kind="stable")
+    order = order[np.argsort(cols[order], kind="stable")]  # by contact, then time, then list
+    bounds = np.flatnonzero(np.diff(cols[order])) + 1
+    for mine in np.split(order, bounds) if len(order) else ():  # one contact's events
+        last = np.searchsorted(ev_time[mine], times, side="right") - 1
+        seen = last >= 0
+        states[seen, cols[mine[0]]] = ev_kind[mine[last[seen]]]
+    return states
+
+
 @dataclass(frozen=True)
 class ChainModel:
     n: int
@@ -42,12 +100,12 @@ class ChainModel:
     # ---- geometry --------------------------------------------------------------------------
     @property
     def n_contacts(self) -> int:
-        return self.n + 1 if self.walls else self.n - 1
+        return n_contacts(self.n, self.walls)
 
     @property
     def contact_numbers(self) -> np.ndarray:
-        """Contract numbering of the contacts (1..n+1 with walls, 2..n for a free chain)."""
-        return np.arange(1, self.n + 2) if self.walls else np.arange(2, self.n + 1)
+        """Contract numbering of the contacts (:func:`contact_numbers`)."""
+        return contact_numbers(self.n, self.walls)
 
     def differences(self, x):
         """``x_left - x_right`` for every contact (walls at 0)."""
@@ -136,7 +194,8 @@ class ChainModel:
         x = np.zeros(self.n)
         v = np.zeros(self.n)
         v[bead - 1] = velocity
-        return x, v, np.full(self.n_contacts, bool(closed) and self.gap <= 0.0)
+        states = initial_states(self.n, self.walls, self.gap)
+        return x, v, states if closed else np.zeros_like(states)
 
 
 def model_from_scene(scene) -> "ChainModel":

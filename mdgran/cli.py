@@ -249,7 +249,7 @@ def cmd_run(args) -> int:
             from .budget import format_budget, term_budget
 
             print("term budget (which force terms this scene needs):")
-            print(format_budget(term_budget(res.trajectory, scene)))
+            print(format_budget(term_budget(res.trajectory)))
     if res.status.startswith(LEDGER_EXCEEDED):
         return _fail(f"{res.status}; {args.out} holds every frame and says so in "
                      "/parameters@status", 1)

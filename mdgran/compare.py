@@ -82,7 +82,7 @@ class Criterion:
 @dataclass
 class BackendRuns:
     name: str
-    nominal: object  # Trajectory
+    nominal: object  # Run (mdgran.run_record)
     refined: object
     error: np.ndarray  # [F] own error estimate, max over beads
     factor: float
@@ -169,15 +169,13 @@ def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEM
                        members, res.status, res.ledger_bound)
 
 
-def cluster_statistics(scene, ref: BackendRuns, other: BackendRuns, t_horizon: float):
+def cluster_statistics(ref: BackendRuns, other: BackendRuns, t_horizon: float):
     """KS comparison of the ensembles' cluster lifetimes and sizes past ``t_horizon`` (see the
     module docstring); returns (criteria, info)."""
-    from .analysis import trajectory_history
     from .analysis.statistics import cluster_lives, ks_compare, pooled
 
     def lives(br, t_from):
-        return pooled([cluster_lives(trajectory_history(tr, scene), t_from)
-                       for tr in br.members])
+        return pooled([cluster_lives(tr.measures.history, t_from) for tr in br.members])
 
     t_from, where = t_horizon, "past the horizon"
     a, b = lives(ref, t_from), lives(other, t_from)
@@ -386,7 +384,7 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     criteria, pairs = [], {}
     for other in runs[1:]:
         crit, info = judge(scene, ref, other, pred)
-        crit_s, info["clusters"] = cluster_statistics(scene, ref, other, info["horizon"])
+        crit_s, info["clusters"] = cluster_statistics(ref, other, info["horizon"])
         criteria += crit + crit_s
         pairs[other.name] = info
     report = {

@@ -68,7 +68,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     # ledger error
     fig, ax = plt.subplots(figsize=(8, 4))
     for r, ls in zip(runs, styles):
-        e = np.abs(r.nominal.ledger["total_energy"] - r.nominal.e0) / scale
+        e = np.abs(r.nominal.ledger_error())
         ax.semilogy(r.nominal.time, np.maximum(e, 1e-17), ls, label=r.name)
     ax.set(xlabel="time (1/q)", ylabel="|E(t) - E0| / E_imp",
            title="energy-ledger error of each backend")
@@ -122,15 +122,13 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     fig.tight_layout(rect=(0, 0, 1, 0.94))
     fig.savefig(out / "events.png", dpi=110)
     plt.close(fig)
-    _cluster_figures(out, scene, runs, report, pairs, plt)
+    _cluster_figures(out, runs, report, pairs, plt)
 
 
-def _cluster_figures(out, scene, runs, report, pairs, plt):
+def _cluster_figures(out, runs, report, pairs, plt):
     """clusters.png: clusters over time, cumulative new clusters, lifetime distributions;
     c_eff.png: the effective damping of each backend on the same axes."""
     from matplotlib.ticker import MaxNLocator
-
-    from .analysis import effective_damping, trajectory_history
 
     horizon = min(info["horizon"] for info in report["pairs"].values()) if report["pairs"] \
         else None
@@ -139,7 +137,7 @@ def _cluster_figures(out, scene, runs, report, pairs, plt):
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.2))
     for r in runs:
         tr = r.nominal
-        h = trajectory_history(tr, scene)
+        h = tr.measures.history
         # step functions of time: drawn as steps, the reference wide and pale underneath, the
         # others dashed on top, so that where they coincide both stay visible
         a1.plot(tr.time, h.count_at(tr.time), drawstyle="steps-post", label=r.name,
@@ -174,7 +172,7 @@ def _cluster_figures(out, scene, runs, report, pairs, plt):
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(8, 4))
     for r in runs:
-        ax.plot(r.nominal.time, effective_damping(r.nominal, scene), label=r.name,
+        ax.plot(r.nominal.time, r.nominal.measures.c_eff, label=r.name,
                 **style[r.name])
     if horizon is not None:
         ax.axvline(horizon, label="predictability horizon", **HORIZON_STYLE)

@@ -99,13 +99,13 @@ def compare_decay(micro, macro, step: float = 0.05) -> dict:
             **ratio_windows(s, a, b)}
 
 
-def cluster_activity(traj, scene) -> dict:
-    """How much a chain clusters: new clusters formed, and the time of the last re-clustering
-    event, in units of its own ``T_c``."""
-    from .analysis import characteristic_period, reclustering_events, trajectory_history
+def cluster_activity(run) -> dict:
+    """How much a chain (a :class:`~mdgran.run_record.Run`) clusters: new clusters formed, and
+    the time of the last re-clustering event, in units of its own ``T_c``."""
+    from .analysis import reclustering_events
 
-    tc = characteristic_period(traj)
-    times, new = reclustering_events(trajectory_history(traj, scene))
+    tc = run.measures.characteristic_period
+    times, new = reclustering_events(run.measures.history)
     last = float(times[-1]) if len(times) else None
     return {"clusters_formed": int(np.sum(new)), "T_c": tc,
             "last_reclustering_over_T_c": None if last is None else last / tc}
@@ -114,9 +114,7 @@ def cluster_activity(traj, scene) -> dict:
 def decay_time(traj, level: float = math.exp(-1.0)):
     """First time (in units of ``T_c``) the ``T_c``-windowed ``T / T(0)`` falls below
     ``level``; None if it does not within the run."""
-    from .analysis import characteristic_period
-
-    tc = characteristic_period(traj)
+    tc = traj.measures.characteristic_period
     k = windowed_kinetic(traj.time, traj.ledger["kinetic_energy"], tc)
     i = np.flatnonzero(np.isfinite(k) & (k < level))
     return float(traj.time[i[0]] / tc) if i.size else None
@@ -137,7 +135,7 @@ def run_controls(runs_dir, backend: str = "reference", duration: float | None = 
     from pathlib import Path
 
     from .simulation import BackendUnavailable, run
-    from .trajectory import read_h5
+    from .run_record import read_h5
 
     runs_dir = Path(runs_dir)
     scenes = control_scenes(duration)
@@ -168,14 +166,14 @@ def summarize(trajs: dict, scenes: dict, backends: dict) -> dict:
     out = {"runs": {}, "vs_micro": {}, "missing": {k: backends[k] for k in scenes
                                                     if k not in trajs}}
     for name, tr in trajs.items():
-        sc = scenes[name]
+        sc = tr.scene  # the scene the run stored
         out["runs"][name] = {
             "backend": backends[name], "status": tr.attrs.get("status"),
             "impulse_velocity": float(sc.data["impulse"]["velocity"]),
             "impulse_m_per_s": float(sc.data["impulse"]["velocity"] * sc.scales.velocity),
             "law": sc.law.kind, "lambda": sc.data["contact"].get("lambda"),
             "duration": float(tr.time[-1]), "decay_1e_over_T_c": decay_time(tr),
-            "decay_10pct_over_T_c": decay_time(tr, 0.1), **cluster_activity(tr, sc)}
+            "decay_10pct_over_T_c": decay_time(tr, 0.1), **cluster_activity(tr)}
     for name in ("macro-pulse", "macro-si", "macro-schwarz"):
         if name not in trajs:
             continue

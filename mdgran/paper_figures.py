@@ -1,7 +1,8 @@
 """The paper's figures, drawn from runs and sweep results through :mod:`mdgran.analysis`.
 
-One function per figure; each takes trajectories (or sweep case tables), draws onto a new
-matplotlib figure, saves it as PNG and returns the numbers it shows (for the report).  Time is
+One function per figure; each takes runs (:class:`~mdgran.run_record.Run`, whose cached
+``measures`` it reads) or sweep case tables, draws onto a new matplotlib figure, saves it as PNG
+and returns the numbers it shows (for the report).  Time is
 shown in characteristic periods ``T_c`` (the primary pulse's double crossing time, see
 :mod:`mdgran.analysis.pulse`), as in the paper; energies over the impulse energy.
 """
@@ -33,19 +34,19 @@ def _save(fig, path):
     _plt().close(fig)
 
 
-def _tc(traj):
-    tc = an.characteristic_period(traj)
+def _tc(run):
+    tc = run.measures.characteristic_period
     return tc if np.isfinite(tc) and tc > 0 else 1.0
 
 
-def _energy_map(ax, traj, scene, tc, boundaries=True, title="", cbar=True, vmax=1.0):
+def _energy_map(ax, traj, tc, boundaries=True, title="", cbar=True, vmax=1.0):
     """Beads (vertical) x time (horizontal) map of T_i / max_j T_j, cluster boundaries as lines."""
     emap = an.kinetic_energy_map(traj)
     t = traj.time / tc
     im = ax.imshow(emap.T, aspect="auto", origin="lower", cmap="magma", vmin=0, vmax=vmax,
                    extent=(t[0], t[-1], 0.5, traj.n + 0.5), interpolation="nearest")
     if boundaries:
-        _draw_boundaries(ax, traj, scene, tc)
+        _draw_boundaries(ax, traj, tc)
     ax.set(xlabel="time / T_c", ylabel="bead", title=title)
     ax.yaxis.get_major_locator().set_params(integer=True)
     if cbar:
@@ -53,14 +54,11 @@ def _energy_map(ax, traj, scene, tc, boundaries=True, title="", cbar=True, vmax=
     return im
 
 
-def _draw_boundaries(ax, traj, scene, tc, color="c", lw=0.6):
+def _draw_boundaries(ax, traj, tc, color="c", lw=0.6):
     """A horizontal segment at height k - 1/2 wherever contact k is open (between beads)."""
-    open_ = an.boundary_map(traj, scene)  # [F, n_contacts], contract order
-    n, walls, _ = an.scene_layout(scene)
-    first = 1 if walls else 2
+    open_ = an.boundary_map(traj)  # [F, n_contacts], contract order
     t = traj.time / tc
-    for j in range(open_.shape[1]):
-        k = j + first
+    for j, k in enumerate(traj.contact_numbers):
         o = open_[:, j].astype(np.int8)
         edges = np.flatnonzero(np.diff(np.concatenate(([0], o, [0]))))
         for a, b in zip(edges[::2], edges[1::2]):
@@ -68,28 +66,28 @@ def _draw_boundaries(ax, traj, scene, tc, color="c", lw=0.6):
 
 
 # ---- Fig. 2 ------------------------------------------------------------------------------------
-def fig2(micro, micro_scene, macro, macro_scene, path) -> dict:
+def fig2(micro, macro, path) -> dict:
     """(a) macro and (b) micro kinetic-energy maps, (c) T / E_imp, (d) C_eff / C_+."""
     plt = _plt()
     fig = plt.figure(figsize=(12, 8.5))
     gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.1])
     tcs = {"micro": _tc(micro), "macro": _tc(macro)}
-    _energy_map(fig.add_subplot(gs[0, :]), macro, macro_scene, tcs["macro"], boundaries=False,
+    _energy_map(fig.add_subplot(gs[0, :]), macro, tcs["macro"], boundaries=False,
                 title=f"(a) macro-hertz: kinetic energy per bead, normalized per instant "
                       f"(T_c = {tcs['macro']:.3g})")
-    _energy_map(fig.add_subplot(gs[1, :]), micro, micro_scene, tcs["micro"],
+    _energy_map(fig.add_subplot(gs[1, :]), micro, tcs["micro"],
                 title=f"(b) micro-star: the same, cluster boundaries (open contacts) in cyan "
                       f"(T_c = {tcs['micro']:.3g})")
     axc, axd = fig.add_subplot(gs[2, 0]), fig.add_subplot(gs[2, 1])
     out = {"T_c": tcs}
-    for tr, sc, name, col in ((macro, macro_scene, "macro", "C0"), (micro, micro_scene, "micro", "C3")):
+    for tr, name, col in ((macro, "macro", "C0"), (micro, "micro", "C3")):
         t = tr.time / tcs[name]
-        e_imp = sc.impulse_energy
+        e_imp = tr.scene.impulse_energy
         axc.plot(t, tr.ledger["kinetic_energy"] / e_imp, color=col, lw=0.6, alpha=0.45)
         axc.plot(t, an.smoothed_kinetic(tr) / e_imp, color=col, lw=1.6, label=f"{name}: <<T>>")
-        cbar = an.effective_damping(tr, sc)
+        cbar = tr.measures.c_eff
         axd.plot(t, cbar, color=col, lw=1.4, label=name)
-        out[name] = {"kinetic_remaining": an.run_summary(tr, sc)["kinetic_remaining"],
+        out[name] = {"kinetic_remaining": tr.measures.summary["kinetic_remaining"],
                      "c_eff_peak": float(np.max(cbar)), "c_eff_mean": float(np.mean(cbar))}
     axc.set(xlabel="time / T_c", ylabel="T / E_imp", title="(c) total kinetic energy (thin: "
             "instantaneous; thick: envelope mean)")
@@ -102,11 +100,11 @@ def fig2(micro, micro_scene, macro, macro_scene, path) -> dict:
 
 
 # ---- Fig. 3 ------------------------------------------------------------------------------------
-def long_lived_clusters(traj, scene, count: int = 4, min_size: int = 3, min_periods: float = 4.0):
+def long_lived_clusters(traj, count: int = 4, min_size: int = 3, min_periods: float = 4.0):
     """The ``count`` longest-lived clusters of at least ``min_size`` beads whose lifetime spans
     at least ``min_periods`` periods of their lowest linearized mode; sorted by birth time.
     Returns ``[(cluster, t_born, t_end, omegas)]`` (clusters alive at the run's end run to it)."""
-    hist = an.trajectory_history(traj, scene)
+    hist = traj.measures.history
     lives = cluster_lives(hist)
     rows = list(zip(lives.clusters, lives.born, lives.born + lives.lifetime))
     if hist.clusters:  # clusters alive at the end, censored there
@@ -127,7 +125,7 @@ def long_lived_clusters(traj, scene, count: int = 4, min_size: int = 3, min_peri
         a, b = t0 + 0.15 * (t1 - t0), t1
         if np.count_nonzero((traj.time >= a) & (traj.time <= b)) < 20:
             continue
-        omega, _, _ = an.cluster_modes_in_run(traj, scene, c, a, b)
+        omega, _, _ = an.cluster_modes_in_run(traj, c, a, b)
         if not np.all(np.isfinite(omega[:2])) or omega[0] <= 0:
             continue
         if (b - a) * omega[0] / (2 * math.pi) < min_periods:
@@ -140,16 +138,16 @@ def long_lived_clusters(traj, scene, count: int = 4, min_size: int = 3, min_peri
     return sorted(picked, key=lambda p: p[1])
 
 
-def fig3(traj, scene, path) -> dict:
+def fig3(traj, path) -> dict:
     """(a) micro-star's energy map with the chosen clusters boxed; (b-e) wavelet spectra of
     each cluster's middle bead with its first two linearized frequencies (dashed)."""
     plt = _plt()
-    picked = long_lived_clusters(traj, scene)
+    picked = long_lived_clusters(traj)
     tc = _tc(traj)
     fig = plt.figure(figsize=(12, 8))
     gs = fig.add_gridspec(2, max(len(picked), 1), height_ratios=[1.1, 1])
     ax = fig.add_subplot(gs[0, :])
-    _energy_map(ax, traj, scene, tc, title=f"(a) micro-star: the {len(picked)} longest-lived "
+    _energy_map(ax, traj, tc, title=f"(a) micro-star: the {len(picked)} longest-lived "
                 "clusters of 3 or more beads (white boxes); their middle bead is analysed below")
     roman = ["I", "II", "III", "IV", "V", "VI"]
     rows = []
@@ -183,13 +181,12 @@ def fig3(traj, scene, path) -> dict:
 
 
 # ---- Fig. 4 ------------------------------------------------------------------------------------
-def fig4(traj, scene, path) -> dict:
+def fig4(traj, path) -> dict:
     """Relative velocity amplitude between neighbours (running maximum over 1 time unit)."""
     plt = _plt()
     tc = _tc(traj)
-    n, walls, _ = an.scene_layout(scene)
-    rel = an.relative_velocity_map(traj, walls, window=1.0)
-    first = 1 if walls else 2
+    rel = an.relative_velocity_map(traj, traj.walls, window=1.0)
+    first = int(traj.contact_numbers[0])
     fig, ax = plt.subplots(figsize=(12, 4.2))
     t = traj.time / tc
     im = ax.imshow(rel.T, aspect="auto", origin="lower", cmap="inferno",
@@ -205,14 +202,14 @@ def fig4(traj, scene, path) -> dict:
 
 
 # ---- Fig. 5 ------------------------------------------------------------------------------------
-def fig5(traj, scene, path) -> dict:
+def fig5(traj, path) -> dict:
     """Cumulative new clusters (raw and smoothed), re-clustering rate and C_eff, with the
     coincidence of their peaks."""
     plt = _plt()
     tc = _tc(traj)
-    cbar = an.effective_damping(traj, scene)
-    rc = an.analyze_reclustering(traj, scene, cbar)
-    co = an.run_coincidence(traj, scene)
+    cbar = traj.measures.c_eff
+    rc = traj.measures.reclustering
+    co = traj.measures.coincidence
     t = traj.time / tc
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
     a1.step(t, rc.history.cumulative_at(traj.time), where="post", color="0.5", lw=1,
@@ -303,11 +300,12 @@ def fig6(cases, path, pick=None) -> dict:
     fig, axs = plt.subplots(2, len(chosen), figsize=(3.4 * len(chosen) + 0.8, 6.4),
                             squeeze=False, layout="constrained")
     for j, c in enumerate(chosen):
-        tr, sc = c["traj"](), c["scene"]
+        tr = c["run"]()
         tc = _tc(tr)
-        im = _energy_map(axs[0, j], tr, sc, tc, cbar=False,
+        im = _energy_map(axs[0, j], tr, tc, cbar=False,
                          title=f"K1 = {c['k1']:g} N/m, v0 = {c['v0']:g}")
-        axs[1, j].plot(tr.time / tc, an.effective_damping(tr, sc), color="C3", lw=1.2)
+        time, cbar, _ = c["curves"]
+        axs[1, j].plot(time / tc, cbar, color="C3", lw=1.2)
         axs[1, j].set(xlabel="time / T_c", ylabel="C_eff / C_+" if j == 0 else "")
     fig.colorbar(im, ax=axs[0, :], label="T_i / max_j T_j", pad=0.01)  # one norm, 0 to 1
     fig.suptitle("(a) kinetic energy maps (cyan: cluster boundaries) and (b) effective damping "
@@ -338,14 +336,14 @@ def fig_b(cases, paths) -> dict:
     drawn = []  # B2 and B3 need the colour scale of every case first: keep their curves only
     for c in cases:
         i, j = v0s.index(c["v0"]), k1s.index(c["k1"])
-        tr, sc = c["traj"](), c["scene"]
+        tr = c["run"]()
         tc = _tc(tr)
-        mappables[0] = _energy_map(figs[0][1][i, j], tr, sc, tc, cbar=False, boundaries=False)
-        cbar = an.effective_damping(tr, sc)
-        rc = an.analyze_reclustering(tr, sc, cbar)
-        m = an.representative_segment(rc.segments, rc.segment_c_eff, 0.5 * tc)
-        span = (rc.segments.start[m] / tc, rc.segments.end[m] / tc) if m >= 0 else None
-        drawn.append((i, j, tr.time / tc, cbar, rc.rate, span))
+        mappables[0] = _energy_map(figs[0][1][i, j], tr, tc, cbar=False, boundaries=False)
+        time, cbar, rate = c["curves"]
+        segs, means = c["segments"], c["segment_c_eff"]
+        m = an.representative_segment(segs, means, 0.5 * tc)
+        span = (segs.start[m] / tc, segs.end[m] / tc) if m >= 0 else None
+        drawn.append((i, j, time / tc, cbar, rate, span))
     t_start = min(float(d[2][0]) for d in drawn)
     t_end = max(float(d[2][-1]) for d in drawn)
     rate_max = max([float(np.max(d[4])) for d in drawn] + [0.0])

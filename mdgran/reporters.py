@@ -10,10 +10,10 @@ bound), ``"failed: ..."``, or ``"interrupted"``).
   run completes or fails (a failed run's file holds every frame so far and says so in
   ``/parameters`` attribute ``status``).  An interrupted or killed run leaves nothing under the
   requested name; with checkpoints on, it leaves ``NAME.h5.partial`` to resume from.
-  With ``output.contacts`` on it also stores per-contact time series (compression, force,
-  state) under ``/observables/contacts`` (``docs/output.md``).
-* :class:`MemoryReporter` collects a :class:`~mdgran.trajectory.Trajectory` (with the
-  contacts' states per frame).
+  It always stores every contact's state per frame (``/observables/contacts/closed``); with
+  ``output.contacts`` on, also its compression and force (``docs/output.md``).
+* :class:`MemoryReporter` collects a :class:`~mdgran.run_record.Run` (with the contacts'
+  states per frame).
 * :class:`ProgressReporter` (in :mod:`mdgran.progress`) draws a labelled progress bar on stderr.
 """
 from __future__ import annotations
@@ -28,11 +28,12 @@ import numpy as np
 
 from . import checkpoint
 from .storage import OutputLock, StorageError, abandon, reason
-from .trajectory import LEDGER_NAMES, Trajectory
+from .run_record import LEDGER_NAMES, Run
 
 H5MD_BLOCK = 512  # frames buffered in memory between writes
-#: per-contact time series under /observables/contacts (``output.contacts``): name -> dtype,
-#: unit (nondimensional, physics.md section 1), description
+#: per-contact time series under /observables/contacts: name -> dtype, unit (nondimensional,
+#: physics.md section 1), description.  ``closed`` is always stored; the others with
+#: ``output.contacts`` (:data:`CONTACT_DETAIL`)
 CONTACT_SERIES = {
     "compression": ("f8", "p", "contact compression delta = x_left - x_right - initial_gap"),
     "force": ("f8", "eta", "normal force of the contact law on the attached branch plus the "
@@ -40,6 +41,8 @@ CONTACT_SERIES = {
               "(ChainModel.contact_forces: the force the backend integrates)"),
     "closed": ("i1", "", "contact state: 1 = closed, 0 = open"),
 }
+#: the series of :data:`CONTACT_SERIES` stored only with ``output.contacts``
+CONTACT_DETAIL = ("compression", "force")
 
 
 def software_versions() -> dict:
@@ -60,8 +63,9 @@ def software_versions() -> dict:
 
 
 class MemoryReporter:
-    """Keeps every frame in memory; ``trajectory()`` returns them as arrays, with the
-    contacts' states (``Trajectory.closed``, ``[frames, n_contacts]`` bool)."""
+    """Keeps every frame in memory; :meth:`record` returns them as a
+    :class:`~mdgran.run_record.Run`, with the contacts' states (``Run.closed``,
+    ``[frames, n_contacts]`` bool)."""
 
     def __init__(self):
         self.time, self.x, self.v, self.closed = [], [], [], []
@@ -81,15 +85,17 @@ class MemoryReporter:
     def close(self, status):
         self.status = status
 
-    def trajectory(self, scene_toml="", backend="") -> Trajectory:
+    def record(self, scene=None, backend="") -> Run:
+        """The frames so far as a :class:`~mdgran.run_record.Run` of ``scene`` (a
+        :class:`~mdgran.scene.Scene`) on ``backend``."""
         ev = self.events
-        return Trajectory(
+        return Run(
             time=np.array(self.time), x=np.array(self.x), v=np.array(self.v),
             ledger={k: np.array(v) for k, v in self.ledger.items()},
             ev_time=np.array([e.time for e in ev], dtype=float),
             ev_contact=np.array([e.contact for e in ev], dtype=np.int64),
             ev_kind=np.array([e.kind for e in ev], dtype=np.int8),
-            scene_toml=scene_toml, backend=backend, attrs={"status": self.status},
+            scene=scene, backend=backend, attrs={"status": self.status},
             closed=np.array(self.closed, dtype=bool) if self.closed else None)
 
 
@@ -101,11 +107,12 @@ class H5MDWriter:
     (full disk, quota) raises :class:`~mdgran.storage.StorageError` after the temporary is
     removed; the requested name is never touched.
 
-    ``contacts`` (default: the scene's ``output.contacts``) adds the per-contact time series
-    ``/observables/contacts/{compression,force,closed}`` (:data:`CONTACT_SERIES`), computed
-    from each frame's ``x``, ``v`` and ``closed`` with the scene's
-    :class:`~mdgran.chain.ChainModel`.  ``/parameters`` attribute ``mpi_ranks`` records the
-    number of MPI ranks the run was split over (:meth:`mpi_ranks_of`; ``backend``, default
+    Every contact's state per frame is stored (``/observables/contacts/closed``, from each
+    frame's ``closed``); ``contacts`` (default: the scene's ``output.contacts``) adds the
+    per-contact time series ``/observables/contacts/{compression,force}``
+    (:data:`CONTACT_SERIES`), computed from each frame's ``x``, ``v`` and ``closed`` with the
+    scene's :class:`~mdgran.chain.ChainModel`.  ``/parameters`` attribute ``mpi_ranks``
+    records the number of MPI ranks the run was split over (:meth:`mpi_ranks_of`; ``backend``, default
     the object whose method ``state_source`` is, tells which backend ran)."""
 
     def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
@@ -135,7 +142,7 @@ class H5MDWriter:
         self.positions = scene.data["output"]["positions"] if positions is None else positions
         self.contacts = (bool(scene.data["output"].get("contacts", False)) if contacts is None
                          else bool(contacts))
-        self.model = None  # the ChainModel, built when the contacts are stored
+        self.model = None  # the scene's ChainModel (contact numbering, compressions, forces)
         self.backend = backend if backend is not None else getattr(state_source, "__self__",
                                                                    None)
         self.mpi_ranks = None  # known once the backend has started (first frame)
@@ -200,8 +207,8 @@ class H5MDWriter:
     def _series_paths(self, f) -> list:
         chain = [f"particles/chain/{name}" for name in ("displacement", "velocity", "position")
                  if f"particles/chain/{name}" in f]
-        contacts = ([f"observables/contacts/{name}" for name in CONTACT_SERIES]
-                    if "observables/contacts" in f else [])
+        contacts = [f"observables/contacts/{name}" for name in CONTACT_SERIES
+                    if f"observables/contacts/{name}" in f]
         return chain + [f"observables/{name}" for name in LEDGER_NAMES] + contacts
 
     def _rows(self, meta) -> dict:
@@ -222,12 +229,11 @@ class H5MDWriter:
         self.positions = "position" in chain
         for name in LEDGER_NAMES:
             self._series[name] = {k: obs[f"{name}/{k}"] for k in ("step", "time", "value")}
-        self.contacts = "contacts" in obs
-        if self.contacts:
-            self._contact_model()
-            for name in CONTACT_SERIES:
-                self._series[f"contacts/{name}"] = {k: obs[f"contacts/{name}/{k}"]
-                                                    for k in ("step", "time", "value")}
+        self.contacts = "contacts/compression" in obs
+        self._contact_model()
+        for name in self._contact_names(obs):
+            self._series[f"contacts/{name}"] = {k: obs[f"contacts/{name}/{k}"]
+                                                for k in ("step", "time", "value")}
         for series in self._series.values():
             for ds in series.values():
                 ds.resize(self._frames, axis=0)
@@ -295,18 +301,19 @@ class H5MDWriter:
         obs = f.create_group("observables")
         for name in LEDGER_NAMES:
             self._series[name] = self._make_series(obs, name, ())
+        model = self._contact_model()
+        g = obs.create_group("contacts")
+        g.attrs["contact"] = np.asarray(model.contact_numbers, dtype=np.int64)
+        g.attrs["numbering"] = ("value column j is contact number contact[j]; contact i joins "
+                                "bead i-1 and bead i (beads 0, n+1: walls), as in /events")
+        for name in self._contact_names():
+            dtype, unit, doc = CONTACT_SERIES[name]
+            series = self._make_series(g, name, (model.n_contacts,), dtype)
+            if unit:
+                series["value"].attrs["unit"] = unit
+            series["value"].attrs["description"] = doc
+            self._series[f"contacts/{name}"] = series
         if self.contacts:
-            model = self._contact_model()
-            g = obs.create_group("contacts")
-            g.attrs["contact"] = np.asarray(model.contact_numbers, dtype=np.int64)
-            g.attrs["numbering"] = ("value column j is contact number contact[j]; contact i joins "
-                                    "bead i-1 and bead i (beads 0, n+1: walls), as in /events")
-            for name, (dtype, unit, doc) in CONTACT_SERIES.items():
-                series = self._make_series(g, name, (model.n_contacts,), dtype)
-                if unit:
-                    series["value"].attrs["unit"] = unit
-                series["value"].attrs["description"] = doc
-                self._series[f"contacts/{name}"] = series
             g["force"].attrs["damping"] = float(model.damping)
             g["force"].attrs["includes_damping"] = np.int8(bool(model.damping))
         ev = f.create_group("events")
@@ -325,6 +332,13 @@ class H5MDWriter:
             "value": g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape,
                                       dtype=dtype, chunks=(chunk,) + shape),
         }
+
+    def _contact_names(self, obs=None) -> list:
+        """The per-contact series this file holds: ``closed`` always (unless ``obs``, an
+        existing file's observables, lacks it: a checkpoint of an older mdgran), and
+        :data:`CONTACT_DETAIL` with ``output.contacts``."""
+        names = [name for name in CONTACT_SERIES if name not in CONTACT_DETAIL or self.contacts]
+        return names if obs is None else [name for name in names if f"contacts/{name}" in obs]
 
     def _contact_model(self):
         if self.model is None:
@@ -374,12 +388,11 @@ class H5MDWriter:
     def report(self, frame, ledger):
         if self.mpi_ranks is None:  # the backend has started: its communicator is known
             self.mpi_ranks = self.mpi_ranks_of(self.backend)
-        per_contact = None
+        per_contact = {"closed": np.asarray(frame.closed, dtype=np.int8).copy()}
         if self.contacts:
             m = self.model
-            per_contact = (m.compressions(frame.x), m.contact_forces(frame.x, frame.v,
-                                                                     frame.closed),
-                           np.asarray(frame.closed, dtype=np.int8).copy())
+            per_contact["compression"] = m.compressions(frame.x)
+            per_contact["force"] = m.contact_forces(frame.x, frame.v, frame.closed)
         self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger, per_contact))
         self._events.extend(frame.events)
         self._last_step = frame.step
@@ -427,11 +440,11 @@ class H5MDWriter:
             for name in LEDGER_NAMES:
                 self._append(f"observables/{name}", self._series[name], steps, times,
                              np.array([b[4][name] for b in self._buf]))
-            if self.contacts:
-                for j, name in enumerate(CONTACT_SERIES):
-                    key = f"contacts/{name}"
+            for name in CONTACT_SERIES:
+                key = f"contacts/{name}"
+                if key in self._series:
                     self._append(f"observables/{key}", self._series[key], steps, times,
-                                 np.array([b[5][j] for b in self._buf]))
+                                 np.array([b[5][name] for b in self._buf]))
             self._frames += len(self._buf)
             self._buf = []
         if self._events:

@@ -168,10 +168,11 @@ SCHEMA = {
     "output": {
         "positions": Key(True, "bool", "true or false (store H5MD position; false for long "
                          "chains)", "", "store the H5MD position element"),
-        "contacts": Key(False, "bool", "true or false (store per-contact compression, force "
-                        "and state; 17 bytes per contact per frame)", "",
-                        "store /observables/contacts/{compression,force,closed} per frame "
-                        "(docs/output.md); off by default: 17 bytes x contacts per frame"),
+        "contacts": Key(False, "bool", "true or false (store per-contact compression and "
+                        "force; 16 bytes per contact per frame)", "",
+                        "also store /observables/contacts/{compression,force} per frame "
+                        "(docs/output.md); off by default: 16 bytes x contacts per frame (the "
+                        "contact states, /observables/contacts/closed, are always stored)"),
     },
     "material": {
         "diameter": Key(None, "float>0?", "a number in [1e-9, 10] (m)", "m", "bead diameter",

@@ -24,6 +24,7 @@ from .backends import BadSpec, get_backend, parse_spec
 from .backends.base import IntegrationError
 from .checkpoint import CheckpointError
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
+from .run_record import ledger_scale, relative_ledger_error
 from .scene import SceneError
 from .storage import OutputLocked
 
@@ -42,11 +43,12 @@ class RunResult:
     section 1: time ``1/q``, length ``p``, energy ``eta p``).
 
     Attributes:
-        trajectory: the frames and events in memory (:class:`~mdgran.trajectory.Trajectory`),
-            or None for ``keep=False``.
+        trajectory: the run's record in memory (:class:`~mdgran.run_record.Run`: frames,
+            contact states, events, scene, status), or None for ``keep=False``.
         stats: the backend's counters (``steps``, ``events``, ``wall_time_s``, ...).
         status: ``"complete"``, ``"failed: ..."`` or ``"ledger-exceeded: ..."``.
-        max_ledger_error: ``max |E(t) - E0| / E_imp`` over the frames (``|E0|`` if no impulse).
+        max_ledger_error: ``max |E(t) - E0| / E_imp`` over the frames (scale:
+            :func:`~mdgran.run_record.ledger_scale`).
         error: the failure's one-line message, or None.
         ledger_bound: the backend's declared bound on ``max_ledger_error`` (same scale).
     """
@@ -116,7 +118,8 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
     H5MD writer's buffer (``H5MD_BLOCK`` frames of x and v and their copies at a flush, plus 3
-    arrays of positions, plus 17 bytes per contact with ``output.contacts``), the frames kept
+    arrays of positions, plus 1 byte per contact for its state, 17 with ``output.contacts``),
+    the frames kept
     in memory (``keep``: x and v, and the copies made for the trajectory, plus ~500 bytes of
     Python objects per frame); on disk x, v (and positions, and the per-contact series) and
     the six observables, each with its step and time."""
@@ -126,11 +129,12 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     r = scene.data["run"]
     frames = int(float(r["duration"]) / float(r["output_interval"]) + 1e-9) + 1
     pos = 3 if scene.data["output"]["positions"] else 0
-    con = 17.0 / 8.0 if scene.data["output"].get("contacts") else 0.0  # 2 f8 + 1 i1 per contact
+    detail = bool(scene.data["output"].get("contacts"))
+    con = (17.0 if detail else 1.0) / 8.0  # per contact: 2 f8 + 1 i1, or the i1 state alone
     block = min(frames, H5MD_BLOCK)
     memory = 8.0 * n * (10 + block * (4 + pos + con)) + (frames * (4 * 8.0 * n + 500) if keep
                                                           else 0)
-    disk = frames * (8.0 * n * (2 + pos + con) + 16.0 * (2 + (pos > 0) + 3 * (con > 0))
+    disk = frames * (8.0 * n * (2 + pos + con) + 16.0 * (2 + (pos > 0) + (3 if detail else 1))
                      + 6 * 24.0)
     return {"n": n, "frames": frames, "memory": memory, "disk": disk}
 
@@ -243,8 +247,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     if progress:
         reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
                                      label=f"{scene.name} [{b.name}]"))
-    scale = scene.impulse_energy or 1.0
     e0 = writer.resume_e0 if start is not None else None
+    scale = ledger_scale(scene.impulse_energy, 0.0 if e0 is None else e0)  # set again at E0
     max_err = writer.resume_max_error / scale if start is not None else 0.0
     term_max = writer.resume_term_max if start is not None else 0.0  # largest |ledger term|
     status, err = "complete", None
@@ -254,9 +258,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
                                frame.dissipated_hysteresis)
             if e0 is None:
                 e0 = led["total_energy"]
-                if not scene.impulse_energy:
-                    scale = max(abs(e0), 1.0)
-            max_err = max(max_err, abs(led["total_energy"] - e0) / scale)
+                scale = ledger_scale(scene.impulse_energy, e0)
+            max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0, scale)))
             term_max = max(term_max, max(abs(v) for v in led.values()))
             for r in reps:
                 r.report(frame, led)
@@ -274,7 +277,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     for r in reps:
         r.close(status)
     result = RunResult(
-        trajectory=mem.trajectory(scene.to_toml(), b.name) if mem is not None else None,
+        trajectory=mem.record(scene, b.name) if mem is not None else None,
         stats=b.stats, status=status, max_ledger_error=max_err, error=err, ledger_bound=bound)
     if err is not None and raise_errors:
         raise IntegrationError(err)

@@ -35,7 +35,7 @@ from . import analysis as an
 from . import paper_figures as pf
 from . import controls
 from .scene import load_scene
-from .trajectory import read_h5
+from .run_record import read_h5
 
 FLAGSHIP = ("micro-star", "macro-hertz")
 #: beyond the paper: sweep name -> (axis shown as colour, its label, log colour scale)
@@ -52,7 +52,8 @@ def _atomic_write(path: Path, text: str):
 
 def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None,
                label: str | None = None):
-    """The run ``out/NAME.h5`` (made if missing) and its scene; ``label``: its progress line's
+    """The run ``out/NAME.h5`` (made if missing), as read back from the file (a
+    :class:`~mdgran.run_record.Run`, its scene the stored one); ``label``: its progress line's
     label (default the scene and backend)."""
     from .simulation import run
 
@@ -67,7 +68,7 @@ def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None
             reporters.append(ProgressReporter(float(scene.data["run"]["duration"]),
                                               label=label or f"{name} [{backend}]"))
         run(scene, backend, out=path, progress=False, keep=False, reporters=reporters)
-    return read_h5(path), scene
+    return read_h5(path)
 
 
 def _case_record(sweep_dir: Path, index: int):
@@ -120,10 +121,12 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
 
 
 def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
-    """Every finished case of a sweep folder: params, scene, a lazy trajectory loader, and the
-    run summary recomputed with the current analysis code.  A folder with cases missing their
-    files is refused (:func:`check_sweep_files`); a case that failed without an ``.h5`` is left
-    out here (the report names it in its run status)."""
+    """Every finished case of a sweep folder: params, the scene stored in its run file, a lazy
+    loader of its :class:`~mdgran.run_record.Run` (``"run"``), and its measures
+    (:class:`~mdgran.measures.Measures`: the summary recomputed with the current analysis code,
+    the C_eff and rate curves, the channels, segments and null-model case).  A folder with
+    cases missing their files is refused (:func:`check_sweep_files`); a case that failed
+    without an ``.h5`` is left out here (the report names it in its run status)."""
     check_sweep_files(sweep_dir, key)
     spec = json.loads((sweep_dir / "sweep.json").read_text())
     cases = []
@@ -131,21 +134,22 @@ def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
         h5 = sweep_dir / "cases" / f"{c['index']:04d}.h5"
         if not h5.exists():
             continue
-        scene = load_scene(spec["scene"], [tuple(o) for o in c["overrides"]])
+        run = read_h5(h5)
+        m = run.measures
         p = c["params"]
-        row = {"index": c["index"], "params": p, "scene": scene,
+        row = {"index": c["index"], "params": p, "scene": run.scene,
                "k1": p.get("substrate.k1_si", p.get("substrate.k1")),
                "v0": p.get("impulse.velocity"),
-               "traj": (lambda path=h5: read_h5(path))}
-        tr = row["traj"]()
-        row.update(an.run_summary(tr, scene))
-        cbar = an.effective_damping(tr, scene)  # kept for the pooled coincidence test
-        row["curves"] = (tr.time, cbar, an.analyze_reclustering(tr, scene, cbar).rate)
-        ch = an.channel_damping(tr, scene)  # for the null models (null_models)
-        row["channels"] = {"viscous": ch["viscous"], "hysteresis": ch["hysteresis"]}
-        row["null_case"] = an.case_of_run(tr, scene, cbar)
-        row["ledger_error"] = float(np.max(np.abs(tr.ledger_error(scene.impulse_energy or 1.0))))
-        row["status"] = str(tr.attrs.get("status", "unknown (no status in the file)"))
+               "run": (lambda path=h5: read_h5(path))}
+        row.update(m.summary)
+        row["curves"] = (run.time, m.c_eff, m.rate)  # for the pooled coincidence test
+        row["segments"] = m.reclustering.segments  # for Fig. B2
+        row["segment_c_eff"] = m.reclustering.segment_c_eff
+        row["channels"] = {"viscous": m.channels["viscous"],  # for the null models
+                           "hysteresis": m.channels["hysteresis"]}
+        row["null_case"] = m.null_case
+        row["ledger_error"] = run.max_ledger_error
+        row["status"] = run.status or "unknown (no status in the file)"
         cases.append(row)
     return cases
 
@@ -157,8 +161,8 @@ def not_complete(cases: list) -> list:
 
 
 def run_status(runs: dict, cases: list) -> dict:
-    """The status of each flagship run (name -> Trajectory) and the sweep's incomplete cases."""
-    return {"runs": {name: str(tr.attrs.get("status", "unknown (no status in the file)"))
+    """The status of each flagship run (name -> Run) and the sweep's incomplete cases."""
+    return {"runs": {name: tr.status or "unknown (no status in the file)"
                      for name, tr in runs.items()},
             "sweep_not_complete": not_complete(cases)}
 
@@ -218,7 +222,7 @@ def make_report(out, small: bool = False, workers: int | None = None,
     runs = {name: ensure_run(name, out / "runs", backend, progress, duration,
                              f"report: flagship run {k} of {len(FLAGSHIP)}, {name} [{backend}]")
             for k, name in enumerate(FLAGSHIP, 1)}
-    (micro, micro_sc), (macro, macro_sc) = runs["micro-star"], runs["macro-hertz"]
+    micro, macro = runs["micro-star"], runs["macro-hertz"]
     sdir = Path(sweep_dir) if sweep_dir is not None else out / "sweep"
     if sweep_dir is None:
         run_sweep(sweep, sdir, workers=workers or (os.cpu_count() or 1), small=small,
@@ -232,22 +236,22 @@ def make_report(out, small: bool = False, workers: int | None = None,
             "figures (named in report.md's run status)")
     say("drawing figures")
     numbers = {
-        "fig2": pf.fig2(micro, micro_sc, macro, macro_sc, figs / "fig2.png"),
-        "fig3": pf.fig3(micro, micro_sc, figs / "fig3.png"),
-        "fig4": pf.fig4(micro, micro_sc, figs / "fig4.png"),
-        "fig5": pf.fig5(micro, micro_sc, figs / "fig5.png"),
+        "fig2": pf.fig2(micro, macro, figs / "fig2.png"),
+        "fig3": pf.fig3(micro, figs / "fig3.png"),
+        "fig4": pf.fig4(micro, figs / "fig4.png"),
+        "fig5": pf.fig5(micro, figs / "fig5.png"),
     }
     numbers["status"] = run_status({"micro-star": micro, "macro-hertz": macro}, cases)
     numbers["status"]["sweep_not_complete"] += failed
-    numbers["decay"] = kinetic_decay(micro, micro_sc, macro, macro_sc)
+    numbers["decay"] = kinetic_decay(micro, macro)
     numbers["paper_details"] = paper_details()
     say("controls: the macro chain matched in m/s, and with adhesion (Schwarz at its lambda)")
     numbers["controls"] = controls.run_controls(out / "runs", backend, duration, progress,
                                                 have={"micro": micro, "macro-pulse": macro})
     if numbers["controls"]["vs_micro"]:
         pf.fig_controls(numbers["controls"], figs / "controls.png")
-    numbers["coincidence_windows"] = coincidence_windows(micro, micro_sc)
-    numbers["smoothing"] = smoothing_sensitivity(micro, micro_sc)
+    numbers["coincidence_windows"] = coincidence_windows(micro)
+    numbers["smoothing"] = smoothing_sensitivity(micro)
     if cases:
         say("pooled coincidence test over the sweep")
         numbers["coincidence_pooled"] = [
@@ -311,14 +315,14 @@ def _json(o):
     return str(o)
 
 
-def kinetic_decay(micro, micro_sc, macro, macro_sc) -> dict:
+def kinetic_decay(micro, macro) -> dict:
     """Kinetic energy of both chains averaged over one T_c (centred running mean of T / T(0):
     a pointwise value would land on the dips where the macro pulse reflects at a wall, every
     T_c / 2), at multiples of T_c, and the first time that mean falls below 1/e and 1/10 (in
     units of each chain's T_c)."""
     out = {}
     for name, tr in (("micro", micro), ("macro", macro)):
-        tc = an.characteristic_period(tr)
+        tc = tr.measures.characteristic_period
         k = tr.ledger["kinetic_energy"] / tr.ledger["kinetic_energy"][0]
         w = max(1, int(round(tc / (tr.time[1] - tr.time[0]))))
         mean = np.convolve(k, np.ones(w) / w, mode="same")
@@ -336,15 +340,17 @@ def kinetic_decay(micro, micro_sc, macro, macro_sc) -> dict:
     return out
 
 
-def coincidence_windows(traj, scene) -> list:
+def coincidence_windows(traj) -> list:
     """The coincidence test at windows of T_c / 4, T_c / 2 and T_c; for all C_eff peaks
     (prominence 0.1 of the range) and the major ones (0.3); in both directions (C_eff peaks
     near a rate peak, rate peaks near a C_eff peak)."""
-    tc = an.characteristic_period(traj)
+    m = traj.measures
+    tc = m.characteristic_period
     t0, t1 = float(traj.time[0]), float(traj.time[-1])
     rows = []
     for prom in (0.1, 0.3):
-        co = an.run_coincidence(traj, scene, prominence=prom)
+        co = an.run_coincidence(traj, prominence=prom, c_eff=m.c_eff,
+                                reclustering=m.reclustering)
         a, b = co["c_eff_peaks"], co["rate_peaks"]
         for frac in (0.25, 0.5, 1.0):
             for direction, x, y in (("C_eff peaks near a rate peak", a, b),
@@ -609,12 +615,15 @@ def realizations_markdown(rz: dict) -> list:
     return L + [""]
 
 
-def smoothing_sensitivity(traj, scene) -> list:
-    """Peak C_eff / C_+ and the coincidence p-value for several smoothing times."""
+def smoothing_sensitivity(traj) -> list:
+    """Peak C_eff / C_+ and the coincidence p-value for several smoothing times (the clusters,
+    which do not depend on it, followed once: ``traj.measures.history``)."""
+    m = traj.measures
     rows = []
     for tau in (5.0, 10.0, 20.0):
-        cb = an.effective_damping(traj, scene, tau)
-        co = an.run_coincidence(traj, scene, smoothing_time=tau)
+        cb = m.c_eff if tau == an.SMOOTHING_TIME else an.effective_damping(traj, smoothing_time=tau)
+        rc = an.analyze_reclustering(traj, cb, smoothing_time=tau, history=m.history)
+        co = an.run_coincidence(traj, smoothing_time=tau, c_eff=cb, reclustering=rc)
         rows.append({"smoothing_time": tau, "c_eff_peak": float(cb.max()),
                      "c_eff_mean": float(cb.mean()), "p_value": co["p_value"],
                      "fraction": co["fraction"]})

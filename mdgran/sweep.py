@@ -210,12 +210,13 @@ def _atomic_json(path: Path, obj):
     os.replace(tmp, path)
 
 
-def case_summary(scene, result) -> dict:
-    """What a sweep keeps of each case besides its H5 file."""
+def case_summary(result) -> dict:
+    """What a sweep keeps of each case besides its H5 file (``result``: the case's
+    :class:`~mdgran.simulation.RunResult`, its record in memory)."""
     import numpy as np
 
     tr = result.trajectory
-    e_imp = scene.impulse_energy or 1.0
+    e_imp = tr.scene.impulse_energy or 1.0
     out = {
         "status": result.status,
         "wall_s": result.stats.get("wall_time_s"),
@@ -229,12 +230,7 @@ def case_summary(scene, result) -> dict:
         "dissipated_viscous_over_eimp": float(tr.ledger["dissipated_viscous"][-1] / e_imp),
         "dissipated_hysteresis_over_eimp": float(tr.ledger["dissipated_hysteresis"][-1] / e_imp),
     }
-    try:
-        from .analysis import run_summary  # the paper's measures, where the analysis has them
-    except ImportError:
-        run_summary = None
-    if run_summary is not None:
-        out.update(run_summary(tr, scene))
+    out.update(tr.measures.summary)  # the paper's measures (mdgran.analysis.run_summary)
     return out
 
 
@@ -270,7 +266,7 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
                                       float(scene.data["run"]["duration"]), progress_every))
     res = run(scene, backend, out=cases / f"{stem}.h5", raise_errors=False, collective=False,
               reporters=reporters, **options)
-    summary = {"index": case["index"], "params": case["params"], **case_summary(scene, res)}
+    summary = {"index": case["index"], "params": case["params"], **case_summary(res)}
     _atomic_json(cases / f"{stem}.json", summary)
     return summary
 

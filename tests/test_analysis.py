@@ -180,22 +180,22 @@ def micro_run():
 
 def test_real_micro_run(micro_run):
     scene, tr = micro_run
-    summary = an.run_summary(tr, scene)
+    summary = an.run_summary(tr)
     assert summary["clusters_formed"] > 10  # re-clustering happens
     assert summary["c_eff_mean"] > 0 and summary["c_eff_max_segment"] > 1.0
     assert summary["c_eff_max_segment_rate"] > 0
     assert 25.0 < summary["characteristic_period"] < 35.0  # 2 * 21 / 1.40
     assert 0 < summary["kinetic_remaining"] < 1
-    cbar = an.effective_damping(tr, scene)
+    cbar = an.effective_damping(tr)
     assert np.all(np.isfinite(cbar))
-    assert set(an.smoothing_effect(tr, scene, (5.0, 20.0))) == {5.0, 20.0}
+    assert set(an.smoothing_effect(tr, (5.0, 20.0))) == {5.0, 20.0}
 
     # maps agree with the cluster history
     kmap = an.kinetic_energy_map(tr)
     assert kmap.shape == tr.x.shape and np.allclose(kmap.max(axis=1), 1.0)
     assert an.relative_velocity_map(tr).shape == (len(tr.time), tr.n + 1)
-    labels = an.cluster_labels(tr, scene)
-    hist = cl.trajectory_history(tr, scene)
+    labels = an.cluster_labels(tr)
+    hist = cl.trajectory_history(tr)
     assert np.array_equal(labels[:, -1] + 1, hist.count_at(tr.time))
 
     # modes of a cluster about its mean state over the last 5 time units: where its contacts
@@ -204,8 +204,8 @@ def test_real_micro_run(micro_run):
 
     law = model_from_scene(scene).law
     checked = 0
-    for c in cl.clusters_of(an.states_map(tr, scene)[-1], tr.n):
-        om, _, comp = an.cluster_modes_in_run(tr, scene, c, 55.0, 60.0)
+    for c in cl.clusters_of(an.states_map(tr)[-1], tr.n):
+        om, _, comp = an.cluster_modes_in_run(tr, c, 55.0, 60.0)
         assert len(om) == c.last - c.first + 1
         assert len(comp) == len(om) - 1 + c.left_wall + c.right_wall
         if len(comp) and np.all(comp > law.delta_force_max):

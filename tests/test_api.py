@@ -17,7 +17,7 @@ except ModuleNotFoundError:  # Python 3.10
 import mdgran
 from mdgran.scene import SCENE_DIR, SceneError
 from mdgran.simulation import RunResult
-from mdgran.trajectory import LEDGER_NAMES, Trajectory
+from mdgran.run_record import LEDGER_NAMES, Run
 
 SHORT = {"run.duration": 3.0}  # micro-star to t = 3: the primary pulse, ~0.5 s on reference
 
@@ -27,7 +27,7 @@ def same_bits(a, b) -> bool:
     return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
-def assert_same_trajectory(a: Trajectory, b: Trajectory):
+def assert_same_trajectory(a: Run, b: Run):
     for name in ("time", "x", "v", "ev_time", "ev_contact", "ev_kind"):
         assert same_bits(getattr(a, name), getattr(b, name)), name
     for name in LEDGER_NAMES:
@@ -47,10 +47,11 @@ def test_import_mdgran_imports_nothing_heavy():
 
 def test_public_names():
     for name in ("run", "read", "scenes", "load_scene", "Scene", "SceneError", "RunResult",
-                 "Trajectory", "IntegrationError", "BackendUnavailable"):
+                 "Run", "Trajectory", "IntegrationError", "BackendUnavailable"):
         assert name in mdgran.__all__ and name in dir(mdgran)
         assert getattr(mdgran, name) is not None
     assert mdgran.Scene is mdgran.scene.Scene
+    assert mdgran.Trajectory is mdgran.Run  # the former name, an alias
     assert "micro-star" in mdgran.scenes() and "hard/tiny" in mdgran.scenes()
     with pytest.raises(AttributeError, match="no_such_name"):
         mdgran.no_such_name  # noqa: B018
@@ -126,7 +127,7 @@ def test_read_equals_the_run_in_memory(tmp_path):
     out = tmp_path / "ms.h5"
     res = mdgran.run("micro-star", "reference", out=out, set=SHORT)
     back = mdgran.read(out)
-    assert isinstance(back, Trajectory)
+    assert isinstance(back, Run)
     assert_same_trajectory(res.trajectory, back)
     assert back.attrs["status"] == res.trajectory.attrs["status"] == "complete"
     assert back.attrs["scene_name"] == "micro-star"
@@ -144,13 +145,13 @@ def test_read_refuses_other_files(tmp_path):
         mdgran.read(tmp_path / "missing.h5")
 
 
-def synthetic(frames: int, n: int, events: int, status: str) -> Trajectory:
-    return Trajectory(time=np.linspace(0.0, 400.0, frames), x=np.zeros((frames, n)),
-                      v=np.zeros((frames, n)),
-                      ledger={k: np.zeros(frames) for k in LEDGER_NAMES},
-                      ev_time=np.zeros(events), ev_contact=np.zeros(events, np.int64),
-                      ev_kind=np.zeros(events, np.int8), scene_toml="[chain]\nn = 1000\n",
-                      backend="fast", attrs={"status": status, "scene_name": "long-chain"})
+def synthetic(frames: int, n: int, events: int, status: str) -> Run:
+    return Run(time=np.linspace(0.0, 400.0, frames), x=np.zeros((frames, n)),
+               v=np.zeros((frames, n)),
+               ledger={k: np.zeros(frames) for k in LEDGER_NAMES},
+               ev_time=np.zeros(events), ev_contact=np.zeros(events, np.int64),
+               ev_kind=np.zeros(events, np.int8), scene_toml="[chain]\nn = 1000\n",
+               backend="fast", attrs={"status": status, "scene_name": "long-chain"})
 
 
 def test_reprs_are_short():

@@ -2,9 +2,7 @@
 import numpy as np
 import pytest
 
-from mdgran.analysis.clusters import contact_states as cluster_states
-from mdgran.analysis.clusters import scene_layout
-from mdgran.budget import contact_states, paper_wire_k3, term_budget
+from mdgran.budget import paper_wire_k3, term_budget
 from mdgran.chain import model_from_scene
 from mdgran.scene import load_scene
 from mdgran.simulation import make_backend, run
@@ -18,7 +16,7 @@ def test_paper_wire_cubic_coefficient():
 def test_budget_of_micro_star():
     sc = load_scene("micro-star", [("run.duration", 40.0)])
     tr = run(sc, "reference").trajectory
-    b = term_budget(tr, sc)
+    b = term_budget(tr)
     assert b["contact"]["force_share"] == 1.0  # the contact law dominates
     assert 0 < b["damping"]["force_share"] < 0.1
     assert not b["substrate_cubic"]["on"] and b["substrate_cubic"]["force_share"] < 1e-4
@@ -26,25 +24,15 @@ def test_budget_of_micro_star():
     assert b["damping"]["max_energy"] == tr.ledger["dissipated_viscous"][-1]
 
 
-def test_contact_states_replay_events():
-    sc = load_scene("micro-star", [("run.duration", 40.0)])
-    tr = run(sc, "reference").trajectory
-    m = model_from_scene(sc)
-    st = contact_states(tr, m)
-    # the number of open contacts at the end is opens - closes
-    assert (~st[-1]).sum() == (tr.ev_kind == 0).sum() - (tr.ev_kind == 1).sum()
-
-
 def test_contact_states_start_open_with_a_gap():
-    # collision-pair starts open (initial_gap > 0): the replayed states are the backend's own
+    # collision-pair starts open (initial_gap > 0): the stored and the replayed states are the
+    # backend's own frames' states
     sc = load_scene("collision-pair")
     truth = np.array([f.closed.copy() for f in make_backend(sc, "reference").frames()])
     tr = run(sc, "reference").trajectory
-    st = contact_states(tr, model_from_scene(sc))
-    n, walls, init = scene_layout(sc)
-    cl = cluster_states(tr.time, tr.ev_time, tr.ev_contact, tr.ev_kind, n, walls, init)
-    assert st.shape == truth.shape == cl.shape and truth.any() and not truth.all()
-    assert (st == truth).all() and (cl == truth).all()
+    st = tr.replayed_states()
+    assert st.shape == truth.shape == tr.closed.shape and truth.any() and not truth.all()
+    assert (st == truth).all() and (tr.closed == truth).all()
 
 
 def test_switched_off_terms_are_not_evaluated():

@@ -16,7 +16,7 @@ from mdgran.chain import model_from_scene
 from mdgran.reporters import H5MDWriter
 from mdgran.scene import load_scene
 from mdgran.simulation import run
-from mdgran.trajectory import read_h5
+from mdgran.run_record import read_h5
 
 T_END, T_STOP = 40.0, 30.0  # micro-star: 14 events by t = 40 (snap-offs and a re-closure)
 SERIES = ("compression", "force", "closed")
@@ -145,19 +145,21 @@ def test_a_damaged_contact_series_is_refused(runs, tmp_path):
             resume=True, keep=False)
 
 
-def test_default_file_has_no_contacts_and_one_rank(tmp_path, monkeypatch):
+def test_default_file_has_the_states_only_and_one_rank(tmp_path, monkeypatch):
+    """Without output.contacts the file holds the contact states (1 byte per contact and frame)
+    and neither compression nor force; read back, they are the run's own."""
     for var in ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE"):
         monkeypatch.delenv(var, raising=False)
     out = tmp_path / "d.h5"
     res = run(load_scene("micro-star", [("run.duration", 2.0)]), "reference", out=out)
     with h5py.File(out, "r") as f:
-        assert "observables/contacts" not in f
+        assert sorted(f["observables/contacts"]) == ["closed"]
         assert sorted(f["observables"]) == sorted(
             ["kinetic_energy", "contact_energy", "substrate_energy", "dissipated_viscous",
-             "dissipated_hysteresis", "total_energy"])
+             "dissipated_hysteresis", "total_energy", "contacts"])
         assert f["parameters"].attrs["mpi_ranks"] == 1
-    assert read_h5(out).closed is None
-    assert res.trajectory.closed.shape == (21, 21)  # kept in memory all the same
+    assert res.trajectory.closed.shape == (21, 21)
+    np.testing.assert_array_equal(read_h5(out).closed, res.trajectory.closed)
 
 
 def test_mpi_ranks_rule(monkeypatch):

@@ -47,7 +47,7 @@ def test_ratio_windows_finds_the_interval_where_micro_is_below(lo, width, depth)
 
 
 def test_decay_time_of_an_exponential():
-    from mdgran.trajectory import Trajectory
+    from mdgran.run_record import Run
 
     t = np.linspace(0.0, 300.0, 3001)
     n = 8
@@ -58,8 +58,8 @@ def test_decay_time_of_an_exponential():
         v[:, i] = np.exp(-((t - 2.0 * (i + 1)) / 0.3) ** 2)
     tau = 50.0
     kin = np.exp(-t / tau)
-    tr = Trajectory(time=t, x=x, v=v, ledger={"kinetic_energy": kin}, ev_time=np.zeros(0),
-                    ev_contact=np.zeros(0, int), ev_kind=np.zeros(0, np.int8))
+    tr = Run(time=t, x=x, v=v, ledger={"kinetic_energy": kin}, ev_time=np.zeros(0),
+             ev_contact=np.zeros(0, int), ev_kind=np.zeros(0, np.int8))
     tc = 2.0 * (n + 1) / 0.5
     # the running mean of exp(-t/tau) over T_c is exp(-t/tau) sinh(T_c/2tau) / (T_c/2tau)
     g = math.sinh(tc / (2 * tau)) / (tc / (2 * tau))

@@ -131,7 +131,7 @@ def test_fig5_draws_no_negative_rate(micro, saved, tmp_path):
     from mdgran import paper_figures as pf
 
     tr, sc = micro
-    pf.fig5(tr, sc, tmp_path / "fig5.png")
+    pf.fig5(tr, tmp_path / "fig5.png")
     fig = saved.figs["fig5.png"]
     rate_ax = fig.axes[1]
     (line,) = [ln for ln in rate_ax.get_lines() if "re-clustering rate" in ln.get_label()]
@@ -145,7 +145,10 @@ def test_fig_b_colour_bars_shared_x_ticks_and_rates(micro, saved, tmp_path):
 
     tr, sc = micro
     # the structure does not depend on the runs: one run labelled as 2 x 2 cases
-    cases = [{"k1": k, "v0": v, "scene": sc, "traj": (lambda: tr)}
+    m = tr.measures
+    cases = [{"k1": k, "v0": v, "scene": sc, "run": (lambda: tr),
+              "curves": (tr.time, m.c_eff, m.rate), "segments": m.reclustering.segments,
+              "segment_c_eff": m.reclustering.segment_c_eff}
              for k in (4.6, 21.5) for v in (2.0, 16.0)]
     paths = [tmp_path / f"figB{k}.png" for k in (1, 2, 3)]
     pf.fig_b(cases, paths)
@@ -170,13 +173,12 @@ def test_fig_b_colour_bars_shared_x_ticks_and_rates(micro, saved, tmp_path):
 def _fake_comparison(traj, scene, names=("reference", "fast")):
     """What compare_report._figures gets, built from one short run (second backend: the same
     run; their lines coincide exactly, the case that hid one of them)."""
-    from mdgran.analysis import trajectory_history
     from mdgran.analysis.statistics import cluster_lives
     from mdgran.compare import BackendRuns
 
     err = np.full(len(traj.time), 1e-9)
     runs = [BackendRuns(n, traj, traj, err, 1.0, 0.1, 1e-9, 1e-9, [traj]) for n in names]
-    lives = cluster_lives(trajectory_history(traj, scene))
+    lives = cluster_lives(traj.measures.history)
     horizon = 0.5 * float(traj.time[-1])
     pred = {"time": traj.time, "difference": np.geomspace(1e-14, 1e-2, len(traj.time))}
     from mdgran.compare import PREDICTABLE, SAFETY

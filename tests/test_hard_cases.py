@@ -19,7 +19,7 @@ FULL = os.environ.get("MDGRAN_FULL") == "1"
 def ledger_rel(res, scene):
     tr = res.trajectory
     scale = max(scene.impulse_energy, float(tr.ledger["kinetic_energy"].max()))
-    return float(np.abs(tr.ledger["total_energy"] - tr.e0).max() / scale)
+    return float(np.abs(tr.ledger_error(scale)).max())
 
 
 @pytest.mark.parametrize("name,duration,bound", [

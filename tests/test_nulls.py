@@ -132,12 +132,12 @@ def test_channel_damping_adds_up():
     kin = 0.5 * np.exp(-0.02 * t) * np.sin(t) ** 2 + 0.01
     ledger = {"kinetic_energy": kin, "dissipated_viscous": 0.3 * (1 - np.exp(-0.02 * t)),
               "dissipated_hysteresis": 0.1 * np.floor(t / 20.0)}
-    traj = SimpleNamespace(time=t, ledger=ledger, n=3)
     scene = SimpleNamespace(data={"contact": {"damping": 0.5}})
-    ch = an.channel_damping(traj, scene)
+    traj = SimpleNamespace(time=t, ledger=ledger, n=3, scene=scene)
+    ch = an.channel_damping(traj)
     scale = np.max(np.abs(ch["total"]))  # the spline solve is linear to ~1e-10 of the scale
     assert np.allclose(ch["viscous"] + ch["hysteresis"], ch["total"], rtol=0, atol=1e-8 * scale)
-    assert np.array_equal(ch["total"], an.effective_damping(traj, scene))
+    assert np.array_equal(ch["total"], an.effective_damping(traj))
 
 
 def test_null_summary():

@@ -111,8 +111,8 @@ def test_sweep_and_report_list_cases_over_their_bound(defect_backend, tmp_path, 
     # mdgran report's status section, from the files
     cases = sweep_cases(out)
 
-    class Run:  # a flagship run as read back: only its attributes matter here
-        attrs = {"status": "complete"}
+    class Run:  # a flagship run as read back: only its status matters here
+        status = "complete"
 
     md = "\n".join(status_markdown({"status": run_status({"micro-star": Run()}, cases)}))
     assert "case 0000" in md and "case 0001" in md and md.count(LEDGER_EXCEEDED) == 2

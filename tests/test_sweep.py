@@ -63,7 +63,7 @@ def test_sweep_on_another_backend_and_no_mixing(tmp_path, capsys):
     assert main(args + ["--backend", "fast"]) == 0
     spec = json.loads((out / "sweep.json").read_text())
     assert spec["backend"] == "fast"
-    from mdgran.trajectory import read_h5
+    from mdgran.run_record import read_h5
 
     assert read_h5(out / "cases" / "0000.h5").backend == "fast"
     capsys.readouterr()

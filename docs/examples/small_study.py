@@ -34,15 +34,16 @@ import mdgran
 BACKENDS = ("reference", "fast")
 
 
-def measures(traj, scene) -> dict:
-    """A few of the study's measures of one run (mdgran.analysis; nondimensional)."""
+def measures(traj) -> dict:
+    """A few of the study's measures of one run (an mdgran.Run; mdgran.analysis, cached in
+    ``traj.measures``; nondimensional)."""
     import numpy as np
 
     from mdgran import analysis
 
     t, kin = traj.time, traj.ledger["kinetic_energy"]
-    cbar = analysis.effective_damping(traj, scene)  # C_eff(t) / C_+, Eq. 9
-    history = analysis.trajectory_history(traj, scene)
+    cbar = traj.measures.c_eff  # C_eff(t) / C_+, Eq. 9
+    history = traj.measures.history
     return {
         "pulse_speed": float(analysis.primary_pulse_speed(traj)),  # beads per time unit
         "T_c": float(analysis.characteristic_period(traj)),
@@ -78,8 +79,8 @@ def main(argv=None) -> int:
             return 1
         traj = mdgran.read(args.out / f"{backend}.h5")  # the file, as another script would
         runs[backend] = traj
-        table[backend] = {**measures(traj, traj.scene),
-                          "ledger_error": res.max_ledger_error, "wall_s": walls[backend]}
+        table[backend] = {**measures(traj),
+                          "ledger_error": traj.max_ledger_error, "wall_s": walls[backend]}
 
     ref, fast = runs["reference"], runs["fast"]
     t_c = table["reference"]["T_c"]
@@ -101,13 +102,11 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mdgran.analysis import effective_damping
-
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
     for backend, traj in runs.items():
         ls = "-" if backend == "reference" else "--"
         ax1.plot(traj.time, traj.ledger["kinetic_energy"], ls, label=backend)
-        ax2.plot(traj.time, effective_damping(traj, traj.scene), ls, label=backend)
+        ax2.plot(traj.time, traj.measures.c_eff, ls, label=backend)
     ax1.set_ylabel("kinetic energy (eta p)")
     ax1.legend()
     ax2.set_ylabel("C_eff / C_+")

@@ -11,7 +11,9 @@ Modules, one idea each (all nondimensional, bead mass 1, time in 1/q, energy in 
 * :mod:`.coincidence`: do C_eff peaks coincide with re-clustering-rate peaks?
 * :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives (issue 14).
 
-:func:`run_summary` condenses a run into scalars for :mod:`mdgran.sweep`.
+:func:`run_summary` condenses a run into scalars for :mod:`mdgran.sweep`.  The functions of a
+whole run take a :class:`~mdgran.run_record.Run` (its scene, contact states and events come
+with it); ``run.measures`` (:class:`~mdgran.measures.Measures`) computes each measure once.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import numpy as np
 
 from .clusters import (MERGE_WITHIN, Cluster, ClusterHistory, ReclusteringAnalysis, Segments,
                        analyze_reclustering, cluster_history, clusters_of, contact_states,
-                       new_clusters, reclustering_events, representative_segment, scene_layout,
+                       new_clusters, reclustering_events, representative_segment,
                        segment_means, segments, smoothed_cumulative, trajectory_history)
 from .coincidence import (channel_coincidence, coincidence_case, coincidence_fraction,
                           coincidence_shift_test, coincidence_test, peak_times,
@@ -43,9 +45,12 @@ from .pulse import characteristic_period, primary_pulse_speed, pulse_duration
 from .wavelet import default_omegas, morlet_cwt, peak_frequency, wavelet_spectrum
 
 
-def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
-                merge_within: float = MERGE_WITHIN) -> dict:
-    """Scalars of one run for a sweep's case summary (undefined values are ``None``).
+def run_summary(traj, *, smoothing_time: float = SMOOTHING_TIME,
+                merge_within: float = MERGE_WITHIN, c_eff=None, reclustering=None) -> dict:
+    """Scalars of one run (a :class:`~mdgran.run_record.Run`) for a sweep's case summary
+    (undefined values are ``None``); ``c_eff``, ``reclustering``: the run's
+    :func:`effective_damping` and :func:`analyze_reclustering` at the same settings, if already
+    computed (:class:`~mdgran.measures.Measures` passes its own).
 
     * ``c_eff_max_segment``: largest segment-mean ``C_eff / C_+`` (the representative segment,
       Sec. VI; all segments but the last); ``c_eff_max_segment_rate``: that segment's
@@ -67,8 +72,10 @@ def run_summary(traj, scene, smoothing_time: float = SMOOTHING_TIME,
     if len(t) < 10:
         return {}
     kin = traj.ledger["kinetic_energy"]
-    cbar = effective_damping(traj, scene, smoothing_time)
-    rc = analyze_reclustering(traj, scene, cbar, smoothing_time, merge_within)
+    cbar = effective_damping(traj, smoothing_time=smoothing_time) if c_eff is None else c_eff
+    rc = (analyze_reclustering(traj, cbar, smoothing_time=smoothing_time,
+                               merge_within=merge_within)
+          if reclustering is None else reclustering)
     rep = rc.representative
     tc = characteristic_period(traj)
     late = representative_segment(rc.segments, rc.segment_c_eff,

@@ -46,48 +46,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..chain import contact_numbers, initial_states, replay_states  # noqa: F401 - re-exported
 from .effective_damping import SMOOTHING_TIME
 
 #: Events closer than this (time units 1/q) form one re-clustering event.  About half the fast
 #: intra-cluster period (2.3 for the paper's chains).
 MERGE_WITHIN = 1.0
 
+#: event times per block of contact states in :func:`cluster_history`
+HISTORY_BLOCK = 4096
+
 Cluster = namedtuple("Cluster", "first last left_wall right_wall")
 Cluster.__doc__ = "A run of beads ``first..last`` (1-based, inclusive) and its wall attachment."
 
 
 # ---- contact states --------------------------------------------------------------------------
-def contact_numbers(n: int, walls: bool = True) -> np.ndarray:
-    """Contract numbers of the contacts: ``1..n+1`` with walls, ``2..n`` without."""
-    return np.arange(1, n + 2) if walls else np.arange(2, n + 1)
-
-
-def initial_states(n: int, walls: bool = True, closed: bool = True) -> np.ndarray:
-    """The paper's initial contact states: every contact closed (open with an initial gap)."""
-    return np.full(len(contact_numbers(n, walls)), bool(closed))
-
-
-def scene_layout(scene) -> tuple:
-    """``(n, walls, initial)`` of a scene: bead count, fixed walls or not, initial states."""
-    ch = scene.data["chain"]
-    n, walls = int(ch["n"]), ch["boundary"] == "fixed"
-    return n, walls, initial_states(n, walls, float(ch.get("initial_gap", 0.0)) <= 0.0)
-
-
 def contact_states(times, ev_time, ev_contact, ev_kind, n: int, walls: bool = True,
                    initial=None) -> np.ndarray:
     """Contact states at each of ``times``: bool ``[F, n_contacts]`` (True = closed).
 
-    A frame at time ``t`` shows every event with ``ev_time <= t`` applied.
+    A frame at time ``t`` shows every event with ``ev_time <= t`` applied
+    (:func:`~mdgran.chain.replay_states`).
     """
-    times = np.asarray(times, float)
-    first = 1 if walls else 2
     init = initial_states(n, walls) if initial is None else np.asarray(initial, bool)
-    states = np.tile(init, (len(times), 1))
-    for k in np.argsort(ev_time, kind="stable"):
-        i0 = np.searchsorted(times, ev_time[k], side="left")
-        states[i0:, int(ev_contact[k]) - first] = bool(ev_kind[k])
-    return states
+    return replay_states(init, ev_time, ev_contact, ev_kind, times, walls)
 
 
 # ---- clusters of one state -------------------------------------------------------------------
@@ -145,37 +127,31 @@ class ClusterHistory:
 
 def cluster_history(ev_time, ev_contact, ev_kind, n: int, walls: bool = True, initial=None,
                     attach: bool = True, min_size: int = 1) -> ClusterHistory:
-    """Follow the clusters through the event list (see the module docstring)."""
-    first = 1 if walls else 2
-    state = initial_states(n, walls) if initial is None else np.array(initial, bool)
-    ev_time = np.asarray(ev_time, float)
-    order = np.argsort(ev_time, kind="stable")
-    current = clusters_of(state, n, min_size)
+    """Follow the clusters through the event list (see the module docstring): the contact
+    states just after each distinct event time (:func:`contact_states` there), and their
+    clusters."""
+    init = initial_states(n, walls) if initial is None else np.array(initial, bool)
+    times = np.unique(np.asarray(ev_time, float))
+    current = clusters_of(init, n, min_size)
     initial_clusters = current
-    times, clusters, new = [], [], []
-    k = 0
-    while k < len(order):
-        t = ev_time[order[k]]
-        while k < len(order) and ev_time[order[k]] == t:
-            e = order[k]
-            state[int(ev_contact[e]) - first] = bool(ev_kind[e])
-            k += 1
-        after = clusters_of(state, n, min_size)
-        times.append(t)
-        clusters.append(after)
-        new.append(len(new_clusters(current, after, attach)))
-        current = after
+    clusters, new = [], []
+    for start in range(0, len(times), HISTORY_BLOCK):  # blocks bound the states' memory
+        block = times[start:start + HISTORY_BLOCK]
+        for state in contact_states(block, ev_time, ev_contact, ev_kind, n, walls, init):
+            after = clusters_of(state, n, min_size)
+            clusters.append(after)
+            new.append(len(new_clusters(current, after, attach)))
+            current = after
     new = np.array(new, int)
     count = np.array([len(c) for c in clusters], int)
     return ClusterHistory(np.array(times, float), clusters, count, new, np.cumsum(new),
                           initial_clusters)
 
 
-def trajectory_history(traj, scene, attach: bool = True, min_size: int = 1) -> ClusterHistory:
-    """:func:`cluster_history` of a run."""
-    n, walls, init = scene_layout(scene)
-    return cluster_history(traj.ev_time, traj.ev_contact, traj.ev_kind, n, walls, init,
-                           attach, min_size)
+def trajectory_history(run, *, attach: bool = True, min_size: int = 1) -> ClusterHistory:
+    """:func:`cluster_history` of a run (a :class:`~mdgran.run_record.Run`)."""
+    return cluster_history(run.ev_time, run.ev_contact, run.ev_kind, run.n, run.walls,
+                           run.initial_states(), attach, min_size)
 
 
 # ---- segments ----------------------------------------------------------------------------------
@@ -312,14 +288,18 @@ class ReclusteringAnalysis:
     representative: int  # segment index, -1 if none
 
 
-def analyze_reclustering(traj, scene, c_eff, smoothing_time: float = SMOOTHING_TIME,
+def analyze_reclustering(run, c_eff, *, smoothing_time: float = SMOOTHING_TIME,
                          merge_within: float = MERGE_WITHIN, attach: bool = True,
-                         min_size: int = 1) -> ReclusteringAnalysis:
-    """Clusters, segments, smoothed rate and segment measures of a run, given its
-    ``c_eff`` [F] (normally :func:`~.effective_damping.effective_damping`)."""
-    hist = trajectory_history(traj, scene, attach, min_size)
-    segs = segments(hist, float(traj.time[0]), float(traj.time[-1]), merge_within)
-    smooth, rate = smoothed_cumulative(traj.time, segs, smoothing_time)
-    means = segment_means(traj.time, c_eff, segs)
+                         min_size: int = 1, history: ClusterHistory | None = None
+                         ) -> ReclusteringAnalysis:
+    """Clusters, segments, smoothed rate and segment measures of a run (a
+    :class:`~mdgran.run_record.Run`), given its ``c_eff`` [F] (normally
+    :func:`~.effective_damping.effective_damping`); ``history``: its
+    :func:`trajectory_history` with the same ``attach`` and ``min_size``, if already known."""
+    hist = trajectory_history(run, attach=attach, min_size=min_size) if history is None \
+        else history
+    segs = segments(hist, float(run.time[0]), float(run.time[-1]), merge_within)
+    smooth, rate = smoothed_cumulative(run.time, segs, smoothing_time)
+    means = segment_means(run.time, c_eff, segs)
     return ReclusteringAnalysis(hist, segs, smooth, rate, means, segs.rate,
                                 representative_segment(segs, means))

@@ -69,17 +69,21 @@ def coincidence_test(a, b, window: float, t_start: float, t_end: float,
             "n_a": int(len(a)), "n_b": int(len(b)), "window": float(window), "null": null}
 
 
-def run_coincidence(traj, scene, window: float | None = None, t_range=None,
+def run_coincidence(traj, *, window: float | None = None, t_range=None,
                     prominence: float = 0.1, smoothing_time: float = SMOOTHING_TIME,
                     merge_within: float = MERGE_WITHIN, n_shifts: int = 1000,
-                    seed: int = 0) -> dict:
+                    seed: int = 0, c_eff=None, reclustering=None) -> dict:
     """:func:`coincidence_test` of a run's C_eff peaks against its re-clustering-rate peaks.
 
     ``window`` defaults to the characteristic period ``T_c``; ``t_range`` to the whole run.
     The result also holds the peak times (``c_eff_peaks``, ``rate_peaks``) and ``t_range``.
+    ``c_eff``, ``reclustering``: the run's :func:`~.effective_damping.effective_damping` and
+    :func:`~.clusters.analyze_reclustering` at the same settings, if already computed.
     """
-    cbar = effective_damping(traj, scene, smoothing_time)
-    rc = analyze_reclustering(traj, scene, cbar, smoothing_time, merge_within)
+    cbar = effective_damping(traj, smoothing_time=smoothing_time) if c_eff is None else c_eff
+    rc = (analyze_reclustering(traj, cbar, smoothing_time=smoothing_time,
+                               merge_within=merge_within)
+          if reclustering is None else reclustering)
     t0, t1 = (float(traj.time[0]), float(traj.time[-1])) if t_range is None else t_range
     window = characteristic_period(traj) if window is None else window
     a = peak_times(traj.time, cbar, prominence, (t0, t1))
@@ -166,7 +170,7 @@ def pooled_coincidence_test(per_case, n_shifts: int = 10000, seed: int = 0) -> d
             "z": _z(obs, null), "null": null}
 
 
-def channel_coincidence(traj, scene, window: float | None = None, t_range=None,
+def channel_coincidence(traj, *, window: float | None = None, t_range=None,
                         prominence: float = 0.1, n_shifts: int = 10000, seed: int = 0,
                         smoothing_time: float = SMOOTHING_TIME,
                         merge_within: float = MERGE_WITHIN) -> dict:
@@ -176,8 +180,9 @@ def channel_coincidence(traj, scene, window: float | None = None, t_range=None,
     ``t_range``), the same rate peaks and shifts for all three."""
     from .effective_damping import channel_damping
 
-    ch = channel_damping(traj, scene, smoothing_time)
-    rc = analyze_reclustering(traj, scene, ch["total"], smoothing_time, merge_within)
+    ch = channel_damping(traj, smoothing_time=smoothing_time)
+    rc = analyze_reclustering(traj, ch["total"], smoothing_time=smoothing_time,
+                              merge_within=merge_within)
     t0, t1 = (float(traj.time[0]), float(traj.time[-1])) if t_range is None else t_range
     window = characteristic_period(traj) if window is None else window
     b = peak_times(traj.time, rc.rate, prominence, (t0, t1))

@@ -105,26 +105,26 @@ def contact_damping(scene) -> float:
     return float(scene.data["contact"]["damping"])
 
 
-def effective_damping(traj, scene, smoothing_time: float = SMOOTHING_TIME,
+def effective_damping(run, *, smoothing_time: float = SMOOTHING_TIME,
                       interpolant: str = "cubic") -> np.ndarray:
-    """Normalized effective damping ``C_eff(t) / C_+`` of a run, [F] (dimensionless).
+    """Normalized effective damping ``C_eff(t) / C_+`` of a run (a
+    :class:`~mdgran.run_record.Run`), [F] (dimensionless).
 
     Example::
 
-        tr = run(load_scene("micro-star"), "reference").trajectory
-        cbar = effective_damping(tr, load_scene("micro-star"))
+        cbar = effective_damping(run(load_scene("micro-star"), "reference").trajectory)
     """
-    c = c_eff(traj.time, dissipated_energy(traj), traj.ledger["kinetic_energy"], traj.n,
+    c = c_eff(run.time, dissipated_energy(run), run.ledger["kinetic_energy"], run.n,
               smoothing_time=smoothing_time, interpolant=interpolant)
-    cp = contact_damping(scene)
+    cp = contact_damping(run.scene)
     return c / cp if cp > 0 else c
 
 
-def smoothing_effect(traj, scene, smoothing_times=(2.5, 5.0, 10.0, 20.0, 40.0),
+def smoothing_effect(run, smoothing_times=(2.5, 5.0, 10.0, 20.0, 40.0), *,
                      interpolant: str = "cubic") -> dict:
     """``C_eff / C_+`` for several smoothing times: ``{tau: array [F]}``, to show how much the
     curve (its peaks in particular) depends on that choice."""
-    return {float(tau): effective_damping(traj, scene, tau, interpolant)
+    return {float(tau): effective_damping(run, smoothing_time=tau, interpolant=interpolant)
             for tau in smoothing_times}
 
 
@@ -155,19 +155,22 @@ def dissipated_channels(traj) -> dict:
     return {name: np.asarray(traj.ledger[key], float) for name, key in CHANNELS.items()}
 
 
-def channel_damping(traj, scene, smoothing_time: float = SMOOTHING_TIME,
-                    interpolant: str = "cubic") -> dict:
+def channel_damping(run, *, smoothing_time: float = SMOOTHING_TIME,
+                    interpolant: str = "cubic", total=None) -> dict:
     """``C_eff / C_+`` [F] of Eq. 9 with ``E_d`` taken from one dissipation channel at a time:
     ``{"total", "viscous", "hysteresis"}``.  ``C_eff`` is linear in ``E_d`` (the smoothing
     spline and its derivative are linear, ``<<T>>`` is shared), so ``viscous + hysteresis`` is
     ``total`` (:func:`effective_damping`) to round-off.  Hysteresis is booked at the snap-off
     events that also form new clusters, so its peaks coincide with re-clustering partly by
-    construction; the viscous part carries no such bookkeeping link."""
-    kin = traj.ledger["kinetic_energy"]
-    cp = contact_damping(scene)
-    out = {"total": effective_damping(traj, scene, smoothing_time, interpolant)}
-    for name, ed in dissipated_channels(traj).items():
-        c = c_eff(traj.time, ed, kin, traj.n, smoothing_time=smoothing_time,
+    construction; the viscous part carries no such bookkeeping link.  ``total``: the run's
+    :func:`effective_damping` at the same settings, if already computed."""
+    kin = run.ledger["kinetic_energy"]
+    cp = contact_damping(run.scene)
+    if total is None:
+        total = effective_damping(run, smoothing_time=smoothing_time, interpolant=interpolant)
+    out = {"total": total}
+    for name, ed in dissipated_channels(run).items():
+        c = c_eff(run.time, ed, kin, run.n, smoothing_time=smoothing_time,
                   interpolant=interpolant)
         out[name] = c / cp if cp > 0 else c
     return out

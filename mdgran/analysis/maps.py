@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
-from .clusters import contact_states, scene_layout
 
 
 def kinetic_energy_map(traj) -> np.ndarray:
@@ -42,20 +41,20 @@ def relative_velocity_map(traj, walls: bool = True, window: float = 0.0) -> np.n
     return rel
 
 
-def states_map(traj, scene) -> np.ndarray:
-    """Contact states at every frame, True = closed [F, n_contacts]."""
-    n, walls, init = scene_layout(scene)
-    return contact_states(traj.time, traj.ev_time, traj.ev_contact, traj.ev_kind, n, walls, init)
+def states_map(traj) -> np.ndarray:
+    """Contact states at every frame, True = closed [F, n_contacts]: the run's stored states
+    (:attr:`~mdgran.run_record.Run.closed`)."""
+    return np.asarray(traj.closed, bool)
 
 
-def boundary_map(traj, scene, states=None) -> np.ndarray:
+def boundary_map(traj, states=None) -> np.ndarray:
     """True where a contact is open (a cluster boundary) [F, n_contacts], contract order."""
-    return ~(states_map(traj, scene) if states is None else np.asarray(states, bool))
+    return ~(states_map(traj) if states is None else np.asarray(states, bool))
 
 
-def cluster_labels(traj, scene, states=None) -> np.ndarray:
+def cluster_labels(traj, states=None) -> np.ndarray:
     """Index of the cluster of each bead at each frame [F, n], counted from the left."""
-    closed = states_map(traj, scene) if states is None else np.asarray(states, bool)
+    closed = states_map(traj) if states is None else np.asarray(states, bool)
     n = traj.n
     inner = closed[:, 1:-1] if closed.shape[1] == n + 1 else closed  # contacts 2..n
     return np.hstack([np.zeros((len(closed), 1), int), np.cumsum(~inner, axis=1)])

@@ -87,22 +87,22 @@ def equilibrium_modes(law, size: int, k1: float, left_wall: bool = False,
     return cluster_modes(law, np.full(nc, law.delta_eq), k1, left_wall, right_wall)
 
 
-def cluster_modes_in_run(traj, scene, cluster, t0: float, t1: float):
+def cluster_modes_in_run(traj, cluster, t0: float, t1: float):
     """Modes of ``cluster`` (a :class:`~.clusters.Cluster`) about its mean state over frames in
     ``[t0, t1]``: each contact's stiffness at its time-mean compression.
 
     Returns ``(omega [b], shapes [b, b], mean_compressions)``.
     """
-    from ..chain import model_from_scene
+    from ..chain import contact_columns, model_from_scene
 
-    model = model_from_scene(scene)
+    model = model_from_scene(traj.scene)
     sel = (traj.time >= t0) & (traj.time <= t1)
     xm = traj.x[sel].mean(axis=0)
     delta = model.compressions(xm)  # per contact, contract order
-    first = 1 if model.walls else 2
     lo = cluster.first if cluster.left_wall else cluster.first + 1  # contract numbers
     hi = cluster.last + 1 if cluster.right_wall else cluster.last
-    comp = delta[lo - first: hi - first + 1]
+    c_lo, c_hi = contact_columns([lo, hi], model.walls)
+    comp = delta[c_lo: c_hi + 1]
     x = xm[cluster.first - 1: cluster.last]
     om, sh = cluster_modes(model.law, comp, model.k1, cluster.left_wall, cluster.right_wall,
                            model.k3, x)

@@ -42,7 +42,7 @@ the one-sided p-value ``(1 + #{null >= observed}) / (1 + K)``, never below ``1 /
 
 Example (one study: cases of a sweep, T_c / 2 as t_min, active windows)::
 
-    cases = [case_of_run(tr, scene) for tr, scene in runs]
+    cases = [case_of_run(run) for run in runs]
     obs = fig7_slope(cases)                         # = report's numbers["fig7"]["slope"]
     print(null_summary(obs, time_shift(cases, n_shuffles=300, rng=0)))
 """
@@ -87,16 +87,20 @@ def null_case(time, c_eff, segs: Segments, rate=None, t_min: float = -np.inf, wi
                     float(t_min), window)
 
 
-def case_of_run(traj, scene, c_eff=None, late: bool = True, active: bool = True,
+def case_of_run(traj, c_eff=None, *, late: bool = True, active: bool = True,
                 smoothing_time: float = SMOOTHING_TIME,
-                merge_within: float = MERGE_WITHIN) -> NullCase:
+                merge_within: float = MERGE_WITHIN, reclustering=None) -> NullCase:
     """A run's :class:`NullCase` as the report's Fig. 7 sees it: ``c_eff`` defaults to
     :func:`~.effective_damping.effective_damping`; ``late``: ``t_min = T_c / 2`` (as
     ``c_eff_late_segment`` of :func:`~mdgran.analysis.run_summary`), else ``-inf`` (the literal
     rule); ``active``: window from ``max(t_start, t_min)`` to one ``T_c`` after the last
-    re-clustering event (as the pooled coincidence test's active part), else the whole run."""
-    cbar = effective_damping(traj, scene, smoothing_time) if c_eff is None else c_eff
-    rc = analyze_reclustering(traj, scene, cbar, smoothing_time, merge_within)
+    re-clustering event (as the pooled coincidence test's active part), else the whole run.
+    ``reclustering``: the run's :func:`~.clusters.analyze_reclustering` with this ``c_eff``
+    at the same settings, if already computed."""
+    cbar = effective_damping(traj, smoothing_time=smoothing_time) if c_eff is None else c_eff
+    rc = (analyze_reclustering(traj, cbar, smoothing_time=smoothing_time,
+                               merge_within=merge_within)
+          if reclustering is None else reclustering)
     tc = characteristic_period(traj)
     t0, t1 = float(traj.time[0]), float(traj.time[-1])
     t_min = 0.5 * tc if late and np.isfinite(tc) else -np.inf

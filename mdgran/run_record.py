@@ -1,0 +1,259 @@
+"""One run's record: frames, contact states, ledger, events, scene and status, in memory.
+
+:class:`Run` is what every later stage reads (analysis, ``budget``, ``compare``, ``study``,
+``sweep``, the paper's figures): it is filled by :class:`~mdgran.reporters.MemoryReporter`
+during a run, or read back from an H5MD file by :func:`read_h5` (``mdgran.read``), and it holds
+everything those stages need, so none of them rebuilds the scene or the contact states.
+Everything is nondimensional (physics.md section 1): length ``p``, time ``1/q``, velocity
+``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass 1).
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from .chain import contact_numbers, initial_states, replay_states
+
+LEDGER_NAMES = ("kinetic_energy", "contact_energy", "substrate_energy",
+                "dissipated_viscous", "dissipated_hysteresis", "total_energy")
+
+
+def ledger_scale(impulse_energy: float, e0: float) -> float:
+    """The energy that ledger errors are measured in (units of eta p): the impulse energy
+    ``E_imp = v0^2 / 2``, or ``max(|E0|, 1)`` for a scene without an impulse."""
+    return float(impulse_energy) if impulse_energy else max(abs(float(e0)), 1.0)
+
+
+def relative_ledger_error(total, e0: float, scale: float):
+    """The ledger error ``(E(t) - E0) / scale`` of total energies ``total`` (a number or an
+    array; units of eta p), with ``scale`` from :func:`ledger_scale`: the one definition that
+    the driver (frame by frame) and :meth:`Run.ledger_error` (over the frames) use."""
+    return (total - e0) / scale
+
+
+def scene_from_toml(text: str, name: str = "scene"):
+    """The :class:`~mdgran.scene.Scene` of a stored resolved scene's TOML text.
+
+    A resolved scene without a material stores the default ``[material] modulus = "table"``,
+    which alone does not resolve (a material needs its diameter): such a table is dropped.  A
+    stored ``[material]`` with a diameter but without E, nu, w or density was written by an
+    mdgran that took the paper's alumina for them (it stored only what the scene file gave);
+    those values are filled in, as that run used them."""
+    from .scene import Scene, resolve, tomllib
+    from .units import ALUMINA
+
+    data = tomllib.loads(text)
+    mat = data.get("material")
+    if isinstance(mat, dict) and "diameter" not in mat:
+        del data["material"]
+    elif isinstance(mat, dict) and "K" not in mat:
+        for key in ("E", "nu", "w", "density"):
+            mat.setdefault(key, ALUMINA[key])
+    return Scene(name, resolve(data))
+
+
+class Run:
+    """One run's record (nondimensional units, physics.md section 1).
+
+    Attributes:
+        time: ``[F]`` frame times (units of ``1/q``), the first 0, one per
+            ``run.output_interval``.
+        x: ``[F, n]`` bead displacements from their rest places (units of ``p``); bead ``i``
+            (1-based in the scene's keys) is column ``i - 1``.
+        v: ``[F, n]`` bead velocities (units of ``p q``).
+        closed: ``[F, n_contacts]`` bool, the state of every contact at every frame (True =
+            closed), column ``j`` being contact number ``contact_numbers[j]``.  Stored by the
+            run; for a file written without them (by an older mdgran), rebuilt from the events
+            (:func:`~mdgran.chain.replay_states`).
+        ledger: energy ledger per frame (units of ``eta p``), name -> ``[F]`` array, for each of
+            ``LEDGER_NAMES``: ``kinetic_energy``, ``contact_energy``, ``substrate_energy``,
+            ``dissipated_viscous``, ``dissipated_hysteresis``, and ``total_energy`` (their sum,
+            constant up to the backend's error).
+        ev_time: ``[E]`` times of the contact events, in order.
+        ev_contact: ``[E]`` contact of each event: contact ``i`` joins bead ``i-1`` and bead
+            ``i`` (1..n+1 with walls, beads 0 and n+1 being the walls; 2..n for a free chain).
+        ev_kind: ``[E]`` 1 = close (snap to contact), 0 = open (snap-off).
+        scene: the run's resolved :class:`~mdgran.scene.Scene` (parsed once, on first use, for
+            a record read from a file); ``scene_toml`` its TOML text, as stored.
+        backend: name of the backend that computed the run.
+        status: ``"complete"``, ``"failed: ..."``, ``"ledger-exceeded: ..."`` (``attrs``).
+        attrs: more about the run: ``status``, ``scene_name``; read from a file, every attribute
+            of its ``/parameters`` group (versions, units, backend_stats, ``mpi_ranks``, ...).
+        measures: the paper's measures of this run, each computed once
+            (:class:`~mdgran.measures.Measures`).
+    """
+
+    def __init__(self, time, x, v, ledger, ev_time, ev_contact, ev_kind, scene_toml: str = "",
+                 backend: str = "", attrs: dict | None = None, closed=None, scene=None):
+        self.time, self.x, self.v = time, x, v
+        self.ledger = ledger
+        self.ev_time, self.ev_contact, self.ev_kind = ev_time, ev_contact, ev_kind
+        self.scene_toml = scene_toml or (scene.to_toml() if scene is not None else "")
+        self.backend = backend
+        self.attrs = {} if attrs is None else attrs
+        if scene is not None:
+            self.__dict__["scene"] = scene  # the cached property's slot: no parsing
+        self._closed = closed
+
+    @property
+    def closed(self) -> np.ndarray:
+        """``[F, n_contacts]`` bool contact states (see the class docstring): as stored, or
+        replayed from the events on first use for a record that has none."""
+        if self._closed is None:
+            self._closed = self.replayed_states()
+        return self._closed
+
+    @closed.setter
+    def closed(self, value):
+        self._closed = value
+
+    # ---- the scene ---------------------------------------------------------------------------
+    @cached_property
+    def scene(self):
+        """The run's resolved :class:`~mdgran.scene.Scene` (None if the record holds no
+        scene), parsed once from :attr:`scene_toml` (:func:`scene_from_toml`)."""
+        if not self.scene_toml:
+            return None
+        return scene_from_toml(self.scene_toml, str(self.attrs.get("scene_name", "") or "scene"))
+
+    @cached_property
+    def _data(self) -> dict:
+        """The scene's tables (parsed scene if there is one, else the raw TOML): what the
+        layout and the ledger scale need, without resolving the scene."""
+        if "scene" in self.__dict__ and self.scene is not None:
+            return self.scene.data
+        if not self.scene_toml:
+            return {}
+        from .scene import tomllib
+
+        return tomllib.loads(self.scene_toml)
+
+    @property
+    def walls(self) -> bool:
+        """Fixed walls at both ends (``chain.boundary = "fixed"``; fixed if unknown)."""
+        return self._data.get("chain", {}).get("boundary", "fixed") == "fixed"
+
+    @property
+    def impulse_energy(self) -> float:
+        """``E_imp = v0^2 / 2`` of the scene's impulse (0 without one; units of eta p)."""
+        return 0.5 * float(self._data.get("impulse", {}).get("velocity", 0.0)) ** 2
+
+    # ---- sizes, numbering, states ------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of moving beads."""
+        return self.x.shape[1]
+
+    @property
+    def frames(self) -> int:
+        """Number of stored frames."""
+        return len(self.time)
+
+    @property
+    def status(self) -> str:
+        """The run's status (``attrs["status"]``; "" if unknown)."""
+        return str(self.attrs.get("status") or "")
+
+    @property
+    def contact_numbers(self) -> np.ndarray:
+        """Contract numbers of the contacts, the columns of :attr:`closed`
+        (:func:`~mdgran.chain.contact_numbers`)."""
+        return contact_numbers(self.n, self.walls)
+
+    def initial_states(self) -> np.ndarray:
+        """The contact states before the first event: all closed, or all open with an initial
+        gap (:func:`~mdgran.chain.initial_states`)."""
+        gap = float(self._data.get("chain", {}).get("initial_gap", 0.0) or 0.0)
+        return initial_states(self.n, self.walls, gap)
+
+    def replayed_states(self, times=None) -> np.ndarray:
+        """The contact states at ``times`` (default: the frames) rebuilt from the events
+        (:func:`~mdgran.chain.replay_states`); on a record that stored them, equal to
+        :attr:`closed` at the frames."""
+        return replay_states(self.initial_states(), self.ev_time, self.ev_contact, self.ev_kind,
+                             self.time if times is None else times, self.walls)
+
+    # ---- energy ------------------------------------------------------------------------------
+    @property
+    def e0(self) -> float:
+        """Total energy of the first frame (``eta p``)."""
+        return float(self.ledger["total_energy"][0])
+
+    def ledger_scale(self) -> float:
+        """The energy ledger errors are measured in (:func:`ledger_scale`)."""
+        return ledger_scale(self.impulse_energy, self.e0)
+
+    def ledger_error(self, scale: float | None = None) -> np.ndarray:
+        """``(total_energy(t) - E0) / scale`` over the frames; ``scale`` defaults to
+        :meth:`ledger_scale` (``E_imp``, or ``max(|E0|, 1)`` without an impulse), the scale of
+        the driver's ``max_ledger_error`` and of the backends' declared bounds."""
+        tot = self.ledger["total_energy"]
+        return relative_ledger_error(tot, tot[0], self.ledger_scale() if scale is None else scale)
+
+    @property
+    def max_ledger_error(self) -> float:
+        """``max_t |E(t) - E0| / E_imp`` (:meth:`ledger_error`; 0 for an empty record)."""
+        err = self.ledger_error()
+        return float(np.max(np.abs(err))) if len(err) else 0.0
+
+    def potential_energy(self) -> np.ndarray:
+        """Contact plus substrate energy per frame (``eta p``)."""
+        return self.ledger["contact_energy"] + self.ledger["substrate_energy"]
+
+    # ---- analysis ----------------------------------------------------------------------------
+    @cached_property
+    def measures(self):
+        """The paper's measures of this run, computed once each on first use
+        (:class:`~mdgran.measures.Measures`)."""
+        from .measures import Measures
+
+        return Measures(self)
+
+    def __repr__(self) -> str:
+        parts = []
+        if self.attrs.get("scene_name"):
+            parts.append(f"scene={str(self.attrs['scene_name'])!r}")
+        parts.append(f"backend={self.backend!r}")
+        if self.status:
+            status = self.status
+            parts.append(f"status={status if len(status) <= 60 else status[:57] + '...'!r}")
+        t = np.asarray(self.time)
+        span = f"t=[{float(t[0]):.6g}, {float(t[-1]):.6g}]" if t.size else "t=[]"
+        parts += [f"frames={t.size}", f"n={np.shape(self.x)[-1] if np.ndim(self.x) == 2 else 0}",
+                  span, f"events={len(self.ev_time)}"]
+        return f"Run({', '.join(parts)})"
+
+
+def read_h5(path) -> Run:
+    """Read an mdgran H5MD file back into a :class:`Run` (also ``mdgran.read``).  The contact
+    states come from ``/observables/contacts/closed``; a file written without them (an older
+    mdgran, ``output.contacts`` off) gets them rebuilt from its events."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        missing = [g for g in ("particles/chain", "events", "parameters") if g not in f]
+        missing += [f"observables/{name}" for name in LEDGER_NAMES
+                    if f"observables/{name}" not in f]
+        if missing:
+            raise ValueError(f"{path}: not an mdgran H5MD file (no /{missing[0]})")
+        chain = f["particles/chain"]
+        led = {name: f[f"observables/{name}/value"][()] for name in LEDGER_NAMES}
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v)
+                 for k, v in f["parameters"].attrs.items()}
+        closed = None
+        if "observables/contacts/closed/value" in f:
+            closed = f["observables/contacts/closed/value"][()].astype(bool)
+        return Run(
+            time=chain["displacement/time"][()],
+            x=chain["displacement/value"][()],
+            v=chain["velocity/value"][()],
+            ledger=led,
+            ev_time=f["events/time"][()],
+            ev_contact=f["events/contact"][()],
+            ev_kind=f["events/kind"][()],
+            scene_toml=str(attrs.get("scene", "")),
+            backend=str(attrs.get("backend", "")),
+            attrs=attrs,
+            closed=closed,
+        )
