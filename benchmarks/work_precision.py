@@ -10,7 +10,10 @@ Methods and their accuracy settings:
                   and the step split there, at several ``run.dt``;
 * ``verlet``      the same kernel with step-quantized events (a contact switches at the end of
                   the step in which it crossed, as a fixed-step MD code does);
-* ``lammps``      LAMMPS with the Python contact hook, at several ``run.dt``.
+* ``lammps``      LAMMPS with the Python contact hook, at several ``run.dt``;
+* ``native``      LAMMPS with the native contact ``fix mdgran/chain`` in its located-events
+                  mode (the fix integrates the chain and splits each step at its events);
+* ``native-quantized``  the native contact with step-quantized events (plain MD, as the hook).
 
 Errors, against a tight reference run (tolerance 1e-11) of the same scene:
 
@@ -25,7 +28,14 @@ the reference, against log tolerance.  The cost of each method at a ledger error
 off a power-law fit of time against ledger error through its points (``extrapolated`` says when
 1e-6 lies outside the measured range).
 
-Writes benchmarks/results/work_precision.json and work_precision.png.
+For each fixed-step method the summary also gives the ledger error at the scene's own ``run.dt``
+and the predictability horizon as ``mdgran compare`` finds it: the first output time where the
+method's own error estimate, ``2^p / (2^p - 1) max_i |x_dt - x_dt/2|`` (Richardson, order ``p``
+of the method as declared), exceeds ``mdgran.compare.PREDICTABLE`` (0.01 p).
+
+Writes benchmarks/results/work_precision.json and work_precision.png (``--stem`` another name:
+``python benchmarks/work_precision.py --methods native,native-quantized,lammps --repeat 1
+--stem work_precision_native`` measures the LAMMPS paths alone).
 """
 from __future__ import annotations
 
@@ -36,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mdgran.compare import PREDICTABLE
 from mdgran.scene import load_scene
 from mdgran.simulation import BackendUnavailable, run
 
@@ -50,9 +61,15 @@ SETTINGS = {
     "fast": ("run.dt", [0.005, 0.0025, 0.00125, 0.000625, 0.0003125]),
     "verlet": ("run.dt", [0.005, 0.0025, 0.00125, 0.000625, 0.0003125]),
     "lammps": ("run.dt", [0.01, 0.005, 0.0025, 0.00125]),
+    "native": ("run.dt", [0.01, 0.005, 0.0025, 0.00125, 0.000625]),
+    "native-quantized": ("run.dt", [0.01, 0.005, 0.0025, 0.00125, 0.000625]),
 }
 BACKEND = {"reference": ("reference", {}), "fast": ("fast", {}),
-           "verlet": ("fast", {"locate_events": False}), "lammps": ("lammps", {})}
+           "verlet": ("fast", {"locate_events": False}), "lammps": ("lammps", {}),
+           "native": ("lammps", {"contact": "native", "events": "located"}),
+           "native-quantized": ("lammps", {"contact": "native", "events": "quantized"})}
+#: declared order in dt of the fixed-step methods (Richardson factor of the horizon)
+ORDER = {"fast": 2, "verlet": 1, "lammps": 1, "native": 2, "native-quantized": 1}
 
 
 def timed_runs(scene, method, repeat):
@@ -85,6 +102,15 @@ def cost_at(errors, times, target):
     return float(np.exp(np.polyval(p, np.log(target)))), not inside
 
 
+def horizon(time, x_dt, x_half, order):
+    """First time where 2^p/(2^p - 1) max_i |x_dt - x_dt/2| exceeds PREDICTABLE (the end of
+    the run if never): mdgran compare's predictability horizon of a fixed-step method."""
+    n = min(len(x_dt), len(x_half))
+    est = 2.0**order / (2.0**order - 1.0) * np.max(np.abs(x_dt[:n] - x_half[:n]), axis=1)
+    above = np.flatnonzero(est > PREDICTABLE)
+    return float(time[above[0]]) if above.size else float(time[n - 1])
+
+
 def measure_scene(name, methods, repeat, quick):
     duration, window = SCENES[name]
     if quick:
@@ -92,7 +118,9 @@ def measure_scene(name, methods, repeat, quick):
     base = [("run.duration", duration)]
     truth = run(load_scene(name, base + [("run.tolerance", TRUTH_TOL)]), "reference").trajectory
     in_window = truth.time <= window + 1e-9
+    dt0 = float(load_scene(name).data["run"]["dt"])
     rows = []
+    at_dt = {}  # (method, dt) -> positions, for the horizon at dt0
     for method in methods:
         key, values = SETTINGS[method]
         if quick:
@@ -115,6 +143,9 @@ def measure_scene(name, methods, repeat, quick):
                    "wall_s_median": float(np.median(times)),
                    "wall_s_spread": float(np.max(times) - np.min(times)), "repeats": repeat}
             rows.append(row)
+            if key == "run.dt" and res.status == "complete" and any(
+                    abs(value - d) < 1e-12 for d in (dt0, dt0 / 2)):
+                at_dt[method, round(value / dt0, 6)] = tr.x
             print(json.dumps(row), flush=True)
     summary = {}
     for method in methods:
@@ -129,7 +160,15 @@ def measure_scene(name, methods, repeat, quick):
             "order_ledger": slope(x, [r["ledger_error"] for r in mine]),
             "order_in": SETTINGS[method][0],
             "wall_s_at_ledger_1e-6": cost, "extrapolated": extrapolated}
-    return {"scene": name, "duration": duration, "window": window, "rows": rows,
+        if method in ORDER:
+            own = [r for r in mine if abs(r["value"] - dt0) < 1e-12]
+            summary[method]["ledger_error_at_default_dt"] = (own[0]["ledger_error"] if own
+                                                             else None)
+            if (method, 1.0) in at_dt and (method, 0.5) in at_dt:
+                summary[method]["horizon"] = horizon(truth.time, at_dt[method, 1.0],
+                                                     at_dt[method, 0.5], ORDER[method])
+    return {"scene": name, "duration": duration, "window": window, "default_dt": dt0,
+            "rows": rows,
             "summary": summary}
 
 
@@ -171,11 +210,13 @@ def main(argv=None):
     ap.add_argument("--methods", default=",".join(SETTINGS))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="short runs, three settings each")
+    ap.add_argument("--stem", default=None, help="name of the result files (default "
+                    "work_precision, or work_precision_quick with --quick)")
     ap.add_argument("--plot-only", action="store_true",
                     help="redraw the PNG from the JSON of the last run")
     args = ap.parse_args(argv)
+    stem = args.stem or ("work_precision_quick" if args.quick else "work_precision")
     if args.plot_only:
-        stem = "work_precision_quick" if args.quick else "work_precision"
         saved = json.loads((RESULTS / f"{stem}.json").read_text())
         return plot(saved["results"], RESULTS / f"{stem}.png")
     methods = args.methods.split(",")
@@ -193,7 +234,6 @@ def main(argv=None):
                 "lammps_extrapolated": s["lammps"]["extrapolated"]}
         print(res["scene"], json.dumps(s, indent=1), res.get("speedup_vs_lammps_at_1e-6"))
     RESULTS.mkdir(parents=True, exist_ok=True)
-    stem = "work_precision_quick" if args.quick else "work_precision"
     (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1) + "\n")
     plot(results, RESULTS / f"{stem}.png")
 

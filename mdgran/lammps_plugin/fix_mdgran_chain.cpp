@@ -2,7 +2,10 @@
 //
 // The native twin of the Python hook of mdgran/backends/lammps.py (fix external pf/callback):
 // same law, same step-quantized switching, same floating-point operations in the same order,
-// so that the two agree to round-off.  Units: mdgran's nondimensional ones through LAMMPS "lj"
+// so that the two agree to round-off ("events quantized", the default).  With "events located"
+// the fix integrates the chain itself and locates each contact event inside the step, as
+// mdgran's fast backend does: second order in dt through snap events (section "located events"
+// below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
 // units (../../../shared/physics.md section 1): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
@@ -11,6 +14,9 @@
 //     snap_off displacement|force (displacement) damping c   k1 k   k3 k   gap g   (all 0)
 //     walls yes|no (no: tags 1 and N are fixed walls)   table FILE (default: exact law)
 //     closed yes|no (initial state of every contact; yes unless gap > 0)
+//     events quantized|located (quantized: with fix nve and fix spring/self; located: the fix
+//            integrates the atoms of its group that are not walls and applies -k1 u itself,
+//            so no fix nve and no fix spring/self may be defined beside it)
 //
 // Contacts by tag: contact k joins the atoms with tags k and k+1 (found with atom->map, so
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
@@ -25,7 +31,7 @@
 // not-a-knot cubic spline in w = sqrt(delta - delta_min) written by mdgran.contact.ContactTable.
 // fc from lambda: alpha = (1 - exp(-lambda/0.924))/1.02, fc = -6/(alpha^2 + 3).
 //
-// Per step (post_force; hysteresis step-quantized as in the hook):
+// Per step, events quantized (post_force; hysteresis step-quantized as in the hook):
 //   * a closed contact with delta <= delta_off opens (V(delta) goes to D_hysteresis), an open
 //     one with delta >= 0 closes; strict inequalities where delta_off = 0 (DMT, Hertz).
 //     delta_off = delta_min (snap_off displacement) or delta at f = fc (snap_off force).
@@ -39,7 +45,8 @@
 //     advances nothing.
 //   * D_viscous: trapezoidal integral of the damping power c sum (d delta/dt)^2.
 //
-// Output: scalar = contact energy sum V (fix_modify energy yes puts it into pe); vector =
+// Output: scalar = contact energy sum V (located: plus the substrate energy k1 u^2/2 + k3 u^4/4;
+// fix_modify energy yes puts it into pe); vector =
 // [D_hysteresis, D_viscous, number of events]; array = events [time, contact number (1..n+1
 // with walls, 2..n without), kind (1 close, 0 open), step]; per-atom vector = state of the
 // contact to the atom's right (1 closed).  With several MPI ranks each contact is owned by
@@ -55,6 +62,7 @@
 #include "domain.h"
 #include "error.h"
 #include "memory.h"
+#include "modify.h"
 #include "update.h"
 #include "utils.h"
 
@@ -68,11 +76,25 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 static constexpr int NEWTON_STEPS = 7;    // as mdgran/contact.py
-static constexpr int NPERATOM = 4;        // x0, closed, dprev, aprev
+static constexpr int NPERATOM = 4;        // stored in restart files: x0, closed, dprev, aprev
+static constexpr int NEXCHANGE = 6;       // migrate with the atom: those, and xs, vs (located)
+// located events (as mdgran/backends/fast_kernel.py)
+static constexpr int MAX_SWITCHES = 4;    // switches of one contact at one instant (chatter)
+static constexpr int MAX_SUBSTEPS = 10000;    // event splits in one step
+static constexpr double SIMULTANEOUS = 1e-12;    // events within this * (1 + t) switch together
+static constexpr double STATE_TOL = 1e-12;    // a contact beyond its switching point by more
+                                              // than this (units p) switches at once
+static constexpr double SING_BAND = 0.1;    // mean-force kick below delta_min + SING_BAND
+// 5-point Gauss-Legendre nodes and weights on [-1, 1]
+static constexpr double GL_X[5] = {-0.9061798459386640, -0.5384693101056831, 0.0,
+                                   0.5384693101056831, 0.9061798459386640};
+static constexpr double GL_W[5] = {0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
+                                   0.4786286704993665, 0.2369268850561891};
 
 FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     Fix(lmp, narg, arg), x0(nullptr), closed(nullptr), dprev(nullptr), aprev(nullptr),
-    fcon(nullptr), u(nullptr), w(nullptr), left(nullptr), nmax_scratch(0)
+    xs(nullptr), vs(nullptr), fcon(nullptr), u(nullptr), w(nullptr), left(nullptr),
+    fkick(nullptr), anew(nullptr), akick(nullptr), nmax_scratch(0)
 {
   hertz = 0;
   fc = 0.0;
@@ -82,6 +104,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   damping = k1 = k3 = gap = 0.0;
   walls = 0;
   use_table = 0;
+  located = 0;
   for (int iarg = 3; iarg < narg; iarg += 2) {
     if (iarg + 1 >= narg)
       error->all(FLERR, "fix mdgran/chain: keyword {} needs a value", arg[iarg]);
@@ -103,6 +126,11 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     else if (key == "walls") walls = utils::logical(FLERR, val, false, lmp);
     else if (key == "closed") init_closed = utils::logical(FLERR, val, false, lmp);
     else if (key == "table") { use_table = 1; table_file = val; }
+    else if (key == "events") {
+      if (val == "located") located = 1;
+      else if (val != "quantized")
+        error->all(FLERR, "fix mdgran/chain: events must be located or quantized, not {}", val);
+    }
     else error->all(FLERR, "fix mdgran/chain: unknown keyword {}", key);
   }
   if (!hertz && !fc_given) {
@@ -125,6 +153,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   strict = delta_off == 0.0;
   t0 = std::pow(4.0 * sigma, 1.0 / 3.0);
   if (use_table) read_table(table_file.c_str());
+  // displacement snap-off of Schwarz: f ~ sqrt(delta - delta_min) near the event
+  sing = (!hertz && !snap_force && tm > 0.0) ? delta_min + SING_BAND : -INFINITY;
   if (init_closed < 0) init_closed = gap <= 0.0;
 
   if (atom->map_style == Atom::MAP_NONE)
@@ -148,8 +178,9 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   peratom_freq = 1;
   restart_global = 1;
   restart_peratom = 1;
-  comm_forward = 3;
-  maxexchange = NPERATOM;
+  comm_forward = located ? 5 : 3;
+  maxexchange = NEXCHANGE;
+  time_integrate = located;
 
   ntags = (tagint) atom->natoms;
   grow_arrays(atom->nmax);
@@ -160,6 +191,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     x0[i] = x[i][0];
     closed[i] = (init_closed && atom->tag[i] < (tagint) atom->natoms) ? 1.0 : 0.0;
     dprev[i] = aprev[i] = 0.0;
+    xs[i] = x[i][0];
+    vs[i] = 0.0;
   }
   last_step = 0;
   have_last = 0;
@@ -179,6 +212,11 @@ FixMdgranChain::~FixMdgranChain()
   memory->destroy(closed);
   memory->destroy(dprev);
   memory->destroy(aprev);
+  memory->destroy(xs);
+  memory->destroy(vs);
+  memory->destroy(fkick);
+  memory->destroy(anew);
+  memory->destroy(akick);
   memory->destroy(fcon);
   memory->destroy(u);
   memory->destroy(w);
@@ -187,7 +225,7 @@ FixMdgranChain::~FixMdgranChain()
 
 int FixMdgranChain::setmask()
 {
-  return POST_FORCE;
+  return located ? (INITIAL_INTEGRATE | POST_FORCE) : POST_FORCE;
 }
 
 void FixMdgranChain::init()
@@ -195,6 +233,17 @@ void FixMdgranChain::init()
   if (comm->nprocs > 1 && !comm->ghost_velocity)
     error->all(FLERR, "fix mdgran/chain on several ranks needs comm_modify vel yes");
   if (atom->natoms > MAXSMALLINT) error->all(FLERR, "fix mdgran/chain: too many atoms");
+  if (!located) return;
+  // located: this fix moves the chain and owns every x force, so no other fix may do either
+  for (auto *fix : modify->get_fix_list()) {
+    if (fix == this) continue;
+    if (fix->time_integrate)
+      error->all(FLERR, "fix mdgran/chain events located integrates the chain itself: "
+                 "unfix {} (fix {})", fix->id, fix->style);
+    if (utils::strmatch(fix->style, "^spring/self"))
+      error->all(FLERR, "fix mdgran/chain events located applies the linear substrate k1 "
+                 "itself: unfix {} (fix spring/self)", fix->id);
+  }
 }
 
 // ---- the law ------------------------------------------------------------------------------
@@ -286,13 +335,15 @@ inline double FixMdgranChain::disp(int i) const
 
 void FixMdgranChain::setup(int vflag)
 {
-  post_force(vflag);
+  if (located) located_setup();
+  else post_force(vflag);
   sync();
 }
 
 void FixMdgranChain::post_force(int /*vflag*/)
 {
-  compute(update->ntimestep);
+  if (located) located_step();
+  else compute(update->ntimestep);
 }
 
 void FixMdgranChain::compute(bigint step)
@@ -301,17 +352,7 @@ void FixMdgranChain::compute(bigint step)
   ncompute++;
   comm->forward_comm(this);    // ghosts get x0, state and a(t) of their owners
   const int nlocal = atom->nlocal, nall = nlocal + atom->nghost;
-  if (nall > nmax_scratch) {
-    nmax_scratch = atom->nmax;
-    memory->destroy(fcon);
-    memory->destroy(u);
-    memory->destroy(w);
-    memory->destroy(left);
-    memory->create(fcon, nmax_scratch, "mdgran/chain:fcon");
-    memory->create(u, nmax_scratch, "mdgran/chain:u");
-    memory->create(w, nmax_scratch, "mdgran/chain:w");
-    memory->create(left, nmax_scratch, "mdgran/chain:left");
-  }
+  if (nall > nmax_scratch) ensure_scratch();
   tagint *tag = atom->tag;
   double **x = atom->x, **v = atom->v;
   const tagint natoms = ntags = (tagint) atom->natoms;
@@ -471,9 +512,14 @@ void FixMdgranChain::sync()
   std::vector<Event> got(ntot / 4);
   for (size_t e = 0; e < got.size(); e++)
     got[e] = {(bigint) all[4 * e], (tagint) all[4 * e + 1], (int) all[4 * e + 2], all[4 * e + 3]};
-  std::sort(got.begin(), got.end(), [](const Event &a, const Event &b) {
-    return a.step != b.step ? a.step < b.step : a.left < b.left;
-  });
+  if (located)    // in time order (simultaneous ones by contact)
+    std::sort(got.begin(), got.end(), [](const Event &a, const Event &b) {
+      return a.time != b.time ? a.time < b.time : a.left < b.left;
+    });
+  else    // per step by contact, as the hook
+    std::sort(got.begin(), got.end(), [](const Event &a, const Event &b) {
+      return a.step != b.step ? a.step < b.step : a.left < b.left;
+    });
   ev_all.insert(ev_all.end(), got.begin(), got.end());
   ev_local.clear();
   size_array_rows = (int) ev_all.size();
@@ -482,6 +528,451 @@ void FixMdgranChain::sync()
 void FixMdgranChain::post_run()
 {
   sync();
+}
+
+inline double FixMdgranChain::ustart(int i) const
+{
+  return is_wall(atom->tag[i]) ? 0.0 : xs[i] - x0[i];
+}
+inline double FixMdgranChain::vstart(int i) const
+{
+  return is_wall(atom->tag[i]) ? 0.0 : vs[i];
+}
+inline double FixMdgranChain::astart(int i) const
+{
+  return is_wall(atom->tag[i]) ? 0.0 : aprev[i];
+}
+inline int FixMdgranChain::moves(int i) const
+{
+  return (atom->mask[i] & groupbit) && !is_wall(atom->tag[i]);
+}
+
+// scratch arrays (owned and ghost atoms), grown with atom->nmax
+void FixMdgranChain::ensure_scratch()
+{
+  nmax_scratch = atom->nmax;
+  memory->destroy(fcon);
+  memory->destroy(u);
+  memory->destroy(w);
+  memory->destroy(left);
+  memory->destroy(fkick);
+  memory->destroy(anew);
+  memory->destroy(akick);
+  memory->create(fcon, nmax_scratch, "mdgran/chain:fcon");
+  memory->create(u, nmax_scratch, "mdgran/chain:u");
+  memory->create(w, nmax_scratch, "mdgran/chain:w");
+  memory->create(left, nmax_scratch, "mdgran/chain:left");
+  memory->create(fkick, nmax_scratch, "mdgran/chain:fkick");
+  memory->create(anew, nmax_scratch, "mdgran/chain:anew");
+  memory->create(akick, nmax_scratch, "mdgran/chain:akick");
+}
+
+// ---- located events ------------------------------------------------------------------------
+//
+// With "events located" the fix replaces fix nve and fix spring/self: it integrates the chain
+// with the velocity Verlet of mdgran's fast backend (mdgran/backends/fast_kernel.py), locating
+// every contact event inside the step.  A (sub)step of length h from (x0, v0, a0):
+//     v_half = v0 + h/2 a0,   x1 = x0 + h v_half            (drift; initial_integrate)
+//     v_est  = v_half + h/2 a0                               (damping rate at the end)
+//     a1     = a(x1, v_est),  v1 = v_half + h/2 a1           (kick; post_force)
+//     D_visc += h/2 (P0 + P1),   P = c sum_closed (d delta/dt)^2
+// with a = F_left - F_right - k1 u - k3 u^3 (contact forces of the two neighbours, substrate).
+// Near snap-off (Schwarz, displacement rule: f ~ sqrt(delta - delta_min)) the kick uses the
+// mean force over the step, Fv = 2 (V(d1) - V(d0)) / (d1 - d0) - f(d0), so that
+// h/2 (f(d0) + Fv) = h f_mean: second order through the singular force.
+//
+// Inside a step every atom moves on the parabola x0 + s v0 + s^2/2 a0, so the event function
+// of each contact, g = delta - delta_off (closed) or -delta (open), positive inside the state,
+// is the quadratic g(s) = g0 + s g0' + s^2/2 g0''.  A pass flags a contact when its end value
+// could hide a crossing (g1 < 0 or g1 < h/2 g'(h)); the earliest root te over the whole chain
+// (MPI_Allreduce min) splits the step: all atoms are re-integrated to te, the contacts with a
+// root within SIMULTANEOUS of te switch (opening: D_hysteresis += V(delta(te)), exact law),
+// contacts on their switching point and moving out switch back at once (settle), the
+// acceleration and damping power are recomputed in the new states with the actual velocities,
+// and the rest of the step dt - te is integrated as a new substep (repeated for later events).
+// Events are rare: the common step costs one drift, one force pass and one kick.
+
+// The contacts this rank evaluates: those of its owned atoms with their right neighbour (own),
+// and those whose left atom is a ghost and right atom owned (a copy updated identically).
+// left[i] of an owned atom: local index of its left neighbour, -1 if none is evaluated here.
+void FixMdgranChain::build_contacts()
+{
+  const int nlocal = atom->nlocal;
+  if (nlocal + atom->nghost > nmax_scratch) ensure_scratch();
+  tagint *tag = atom->tag;
+  const tagint natoms = ntags = (tagint) atom->natoms;
+  cons.clear();
+  for (int i = 0; i < nlocal; i++) left[i] = -1;
+  for (int i = 0; i < nlocal; i++) {
+    if (tag[i] >= natoms) continue;
+    int j = atom->map(tag[i] + 1);
+    if (j < 0) {
+      if (closed[i] != 0.0)
+        error->one(FLERR, "fix mdgran/chain: contact {} is closed but atom {} is beyond the "
+                   "ghost cut-off (raise comm_modify cutoff)", contact_number(tag[i]), tag[i] + 1);
+      continue;
+    }
+    if (j < nlocal) left[j] = i;
+    cons.push_back({i, j, 1});
+  }
+  for (int i = 0; i < nlocal; i++) {
+    if (left[i] >= 0 || tag[i] <= 1) continue;
+    int l = atom->map(tag[i] - 1);
+    left[i] = l;
+    if (l >= nlocal) cons.push_back({l, i, 0});
+  }
+}
+
+// f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free of
+// its round-off force at delta = 0, which would make resting contacts flicker), else as set up
+double FixMdgranChain::located_force(double d) const
+{
+  return (hertz || !use_table) ? exact_force(d) : spline_force(d);
+}
+
+// Mean force over the compression interval, (V(d1) - V(d0)) / (d1 - d0) (Schwarz): in the
+// branch parameter t the mean of f(t) weighted by delta'(t) = 4 (t^3 - sigma) over [t0, t1];
+// f delta' is a polynomial of degree 9, so 5-point Gauss-Legendre is exact.
+double FixMdgranChain::mean_force(double d0, double d1) const
+{
+  double ta = t_of_delta(d0), tb = t_of_delta(d1);
+  double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
+  double num = 0.0, den = 0.0;
+  for (int k = 0; k < 5; k++) {
+    double tau = mid + half * GL_X[k];
+    double t3 = tau * tau * tau;
+    double wk = GL_W[k] * (t3 - sigma);
+    double uu = t3 - 3.0 * sigma;
+    num += wk * (fc + uu * uu);
+    den += wk;
+  }
+  if (den <= 0.0) {
+    double uu = ta * ta * ta - 3.0 * sigma;
+    return fc + uu * uu;
+  }
+  return num / den;
+}
+
+// Drift of the owned moving atoms from the substep start (xs, vs, aprev) over h:
+//   v = vs + h/2 a0 (= v_half),  x = xs + h v.   Ghosts follow by forward communication.
+void FixMdgranChain::drift(double h)
+{
+  double **x = atom->x, **v = atom->v;
+  const double hh = 0.5 * h;
+  for (int i = 0; i < atom->nlocal; i++) {
+    if (!moves(i)) continue;
+    double vh = vs[i] + hh * aprev[i];
+    x[i][0] = xs[i] + h * vh;
+    v[i][0] = vh;
+  }
+}
+
+// Kick of the owned moving atoms at the end of a pass of length h: v = v_half + h/2 a_kick;
+// the end acceleration becomes the next substep's a0.
+void FixMdgranChain::kick(double h)
+{
+  double **v = atom->v;
+  const double hh = 0.5 * h;
+  for (int i = 0; i < atom->nlocal; i++) {
+    if (moves(i)) v[i][0] = v[i][0] + hh * akick[i];
+    aprev[i] = anew[i];
+  }
+}
+
+// a new substep starts from the current state of the owned atoms
+void FixMdgranChain::start_substep()
+{
+  double **x = atom->x, **v = atom->v;
+  for (int i = 0; i < atom->nlocal; i++) {
+    xs[i] = x[i][0];
+    vs[i] = v[i][0];
+  }
+}
+
+// Forces at the current positions for a pass of length h (v holds v_half; h = 0: an instant,
+// v the actual velocities): contact forces fcon and kick forces fkick (by left atom), the
+// owned atoms' accelerations anew and kicks akick, contacts that may switch (flagged, h > 0).
+// Returns this rank's damping power P = c sum (d delta/dt)^2 over its own closed contacts.
+double FixMdgranChain::located_pass(double h)
+{
+  ncompute++;
+  const int nlocal = atom->nlocal, nall = nlocal + atom->nghost;
+  tagint *tag = atom->tag;
+  double **x = atom->x, **v = atom->v;
+  const double hh = 0.5 * h;
+  for (int i = 0; i < nall; i++) {
+    if (is_wall(tag[i])) {
+      u[i] = w[i] = 0.0;
+    } else {
+      u[i] = x[i][0] - x0[i];
+      w[i] = h > 0.0 ? v[i][0] + hh * aprev[i] : v[i][0];    // v_est = v_half + h/2 a0
+    }
+  }
+  for (int i = 0; i < nlocal; i++) fcon[i] = fkick[i] = 0.0;
+  double power = 0.0;
+  flagged.clear();
+  for (int k = 0; k < (int) cons.size(); k++) {
+    const Con &c = cons[k];
+    double d = u[c.l] - u[c.r] - gap;
+    double rate = w[c.l] - w[c.r];
+    double F = 0.0, Fv = 0.0, g, gd;
+    if (closed[c.l] != 0.0) {
+      if (use_table && d > tab_delta_max)
+        error->one(FLERR, "compression {:.4g} beyond the contact table (delta_max = {:g}) at "
+                   "t = {:.12g}, contact {}", d, tab_delta_max, update->ntimestep * update->dt,
+                   contact_number(tag[c.l]));
+      F = located_force(d);
+      Fv = F;
+      if (h > 0.0 && d < sing) {    // near snap-off: mean-force kick
+        double d0 = ustart(c.l) - ustart(c.r) - gap;
+        Fv = 2.0 * mean_force(d0, d) - located_force(d0);
+      }
+      if (damping != 0.0) {
+        F += damping * rate;
+        Fv += damping * rate;
+        if (c.own) power += damping * rate * rate;
+      }
+      g = d - delta_off;
+      gd = rate;
+    } else {
+      g = -d;
+      gd = -rate;
+    }
+    // a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
+    if (h > 0.0 && (g < 0.0 || g < hh * gd)) flagged.push_back(k);
+    fcon[c.l] = F;
+    fkick[c.l] = Fv;
+  }
+  for (int i = 0; i < nlocal; i++) {
+    double a = 0.0, av = 0.0;
+    if (!is_wall(tag[i])) {
+      double fl = left[i] >= 0 ? fcon[left[i]] : 0.0;
+      double fvl = left[i] >= 0 ? fkick[left[i]] : 0.0;
+      a = fl - fcon[i];
+      av = fvl - fkick[i];
+      double sub = k1 * u[i] + k3 * u[i] * u[i] * u[i];    // substrate: k1 u + k3 u^3
+      a -= sub;
+      av -= sub;
+    }
+    if (!std::isfinite(a) || !std::isfinite(av))
+      error->one(FLERR, "non-finite force at t = {:.12g}, bead {}",
+                 update->ntimestep * update->dt, walls ? tag[i] - 1 : tag[i]);
+    anew[i] = a;
+    akick[i] = av;
+  }
+  return power;
+}
+
+// First s in [0, h] where g(s) = g0 + s g0' + s^2/2 g0'' of contact c falls to min(g0, 0),
+// or -1 (mdgran/backends/fast_kernel.py first_root); g0, g0', g0'' from the substep start,
+// g1 from the end of the pass (in u).
+double FixMdgranChain::first_root(const Con &c, double h) const
+{
+  double g0 = ustart(c.l) - ustart(c.r) - gap;
+  double b = vstart(c.l) - vstart(c.r);
+  double q = astart(c.l) - astart(c.r);
+  double d1 = u[c.l] - u[c.r] - gap;
+  double g1;
+  if (closed[c.l] != 0.0) {
+    g0 -= delta_off;
+    g1 = d1 - delta_off;
+  } else {
+    g0 = -g0;
+    b = -b;
+    q = -q;
+    g1 = -d1;
+  }
+  double cq = 0.5 * q;
+  if (g0 <= 0.0) {    // on its switching point: an event if it moves out
+    if (b < 0.0 || g0 < -STATE_TOL) return 0.0;
+    if (cq < 0.0 && -b / cq <= h) return -b / cq;
+    return g1 < g0 ? h : -1.0;
+  }
+  double s = -1.0;
+  if (cq == 0.0) {
+    if (b < 0.0) s = -g0 / b;
+  } else {
+    double disc = b * b - 4.0 * cq * g0;
+    if (disc >= 0.0) {
+      double qq = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+      double r1 = qq / cq;
+      double r2 = qq != 0.0 ? g0 / qq : -1.0;
+      if (r1 > 0.0 && (r2 <= 0.0 || r1 < r2)) s = r1;
+      else if (r2 > 0.0) s = r2;
+    }
+  }
+  if (s >= 0.0 && s <= h) return s;
+  if (g1 < 0.0) return h;    // out at the end, rounding put the root past h
+  return -1.0;
+}
+
+// Earliest root te among the flagged contacts of all ranks (-1 if none); the contacts of this
+// rank that switch with it (root within tol of te) go into `switching`.
+double FixMdgranChain::earliest_event(double h, double tol)
+{
+  switching.clear();
+  roots.resize(flagged.size());
+  double te = INFINITY;
+  for (size_t k = 0; k < flagged.size(); k++) {
+    roots[k] = first_root(cons[flagged[k]], h);
+    if (roots[k] >= 0.0 && roots[k] < te) te = roots[k];
+  }
+  if (comm->nprocs > 1) {
+    double mine = te;
+    MPI_Allreduce(&mine, &te, 1, MPI_DOUBLE, MPI_MIN, world);
+  }
+  if (te == INFINITY) return -1.0;
+  for (size_t k = 0; k < flagged.size(); k++)
+    if (roots[k] >= 0.0 && roots[k] <= te + tol) switching.push_back(flagged[k]);
+  // the owner's order (by tag of the left atom): the same on any number of ranks
+  std::sort(switching.begin(), switching.end(),
+            [&](int a, int b) { return atom->tag[cons[a].l] < atom->tag[cons[b].l]; });
+  return te;
+}
+
+void FixMdgranChain::add_visc(double dv)
+{
+  if (comm->nprocs == 1) d_visc_all += dv;
+  else d_visc += dv;
+}
+
+void FixMdgranChain::add_event(const Con &c, int kind, double time, double lost)
+{
+  if (!c.own) return;    // the owner of the left atom records it
+  Event e = {update->ntimestep, atom->tag[c.l], kind, time};
+  if (comm->nprocs == 1) {
+    d_hyst_all += lost;
+    ev_all.push_back(e);
+  } else {
+    d_hyst += lost;
+    ev_local.push_back(e);
+  }
+  size_array_rows = (int) ev_all.size();
+}
+
+// Switch contact c at the current positions: opening loses V(delta) (exact law) to
+// D_hysteresis; the new forces follow from the next pass.
+void FixMdgranChain::switch_contact(const Con &c, double time)
+{
+  double d = disp(c.l) - disp(c.r) - gap;
+  if (closed[c.l] != 0.0) {
+    closed[c.l] = 0.0;
+    add_event(c, 0, time, law_energy(d));
+  } else {
+    closed[c.l] = 1.0;
+    add_event(c, 1, time, 0.0);
+  }
+}
+
+// Switch again, at once, every contact of `list` on or over its switching point and moving
+// outward (g <= 0, g' < 0), or beyond it by more than STATE_TOL (the reference's rule), with
+// the actual velocities; more than MAX_SWITCHES switches of one contact stop the run.
+void FixMdgranChain::settle(std::vector<int> &list, double time)
+{
+  std::vector<int> count(list.size(), 1);
+  double **v = atom->v;
+  auto vel = [&](int i) { return is_wall(atom->tag[i]) ? 0.0 : v[i][0]; };
+  for (int moved = 1; moved;) {
+    moved = 0;
+    for (size_t k = 0; k < list.size(); k++) {
+      const Con &c = cons[list[k]];
+      double d = disp(c.l) - disp(c.r) - gap;
+      double rate = vel(c.l) - vel(c.r);
+      double g = closed[c.l] != 0.0 ? d - delta_off : -d;
+      double gd = closed[c.l] != 0.0 ? rate : -rate;
+      if (g < -STATE_TOL || (g <= 0.0 && gd < 0.0)) {
+        if (++count[k] > MAX_SWITCHES)
+          error->one(FLERR, "contact {} chatters at t = {:.12g}: it switches state more than "
+                     "{} times at one instant", contact_number(atom->tag[c.l]), time,
+                     MAX_SWITCHES);
+        switch_contact(c, time);
+        moved = 1;
+      }
+    }
+  }
+}
+
+// LAMMPS's force array gets the acceleration (mass 1) of the current state (thermo, dumps)
+void FixMdgranChain::add_force_to_lammps()
+{
+  double **f = atom->f;
+  for (int i = 0; i < atom->nlocal; i++)
+    if (moves(i)) f[i][0] += aprev[i];
+}
+
+void FixMdgranChain::initial_integrate(int /*vflag*/)
+{
+  start_substep();
+  drift(update->dt);
+}
+
+// Set-up of a run: at the first one, settle every contact and compute a(0) and P(0) with the
+// actual velocities; later ones (same step) hand LAMMPS the stored acceleration unchanged, so
+// that a run in several pieces is the same as one.
+void FixMdgranChain::located_setup()
+{
+  bigint step = update->ntimestep;
+  if (!have_last || step != last_step) {
+    build_contacts();
+    comm->forward_comm(this);
+    std::vector<int> all(cons.size());
+    for (size_t k = 0; k < all.size(); k++) all[k] = (int) k;
+    settle(all, (double) step * update->dt);
+    comm->forward_comm(this);
+    power_prev = located_pass(0.0);
+    kick(0.0);
+    last_step = step;
+    have_last = 1;
+  }
+  add_force_to_lammps();
+}
+
+// One step (post_force; initial_integrate has drifted the owned atoms over dt and LAMMPS has
+// forwarded the ghosts' x and v): pass, locate, split at the earliest event, repeat.
+void FixMdgranChain::located_step()
+{
+  const bigint step = update->ntimestep;
+  const double dt = update->dt;
+  const double t0 = (double) (step - 1) * dt;
+  const double tol = SIMULTANEOUS * (1.0 + std::fabs(t0));
+  build_contacts();
+  double done = 0.0, h = dt;
+  for (int nsub = 0;; nsub++) {
+    comm->forward_comm(this);    // ghosts: x0, state, substep start (xs, vs, aprev)
+    double p1 = located_pass(h);
+    double te = flagged.empty() && comm->nprocs == 1 ? -1.0 : earliest_event(h, tol);
+    const int last = te < 0.0 || te >= h - tol;    // the pass reaches the end of the step
+    if (!last) {    // redo the substep up to the event
+      h = te;
+      drift(h);
+      comm->forward_comm();
+      p1 = located_pass(h);
+    }
+    kick(h);
+    add_visc(0.5 * h * (power_prev + p1));
+    power_prev = p1;
+    if (te < 0.0) break;
+    // the event: switch, settle, forces and damping power in the new states
+    const double tev = t0 + done + h;
+    comm->forward_comm();    // ghosts' velocities after the kick
+    std::vector<int> list = switching;
+    for (int k : list) switch_contact(cons[k], tev);
+    settle(list, tev);
+    comm->forward_comm(this);
+    power_prev = located_pass(0.0);
+    kick(0.0);
+    if (last) break;
+    if (nsub >= MAX_SUBSTEPS)
+      error->one(FLERR, "more than {} events in one step at t = {:.12g}", MAX_SUBSTEPS, tev);
+    done += h;
+    h = dt - done;
+    start_substep();
+    drift(h);
+    comm->forward_comm();
+  }
+  add_force_to_lammps();
+  last_step = step;
+  have_last = 1;
 }
 
 // ---- output -------------------------------------------------------------------------------
@@ -500,6 +991,12 @@ double FixMdgranChain::compute_scalar()
     if (gap != 0.0) delta = delta - gap;
     e += law_energy(delta);
   }
+  if (located)    // the substrate is this fix's too: k1 u^2 / 2 + k3 u^4 / 4
+    for (int i = 0; i < nlocal; i++) {
+      if (!moves(i)) continue;
+      double ui = atom->x[i][0] - x0[i];
+      e += 0.5 * k1 * ui * ui + 0.25 * k3 * ui * ui * ui * ui;
+    }
   double all = e;
   if (comm->nprocs > 1) MPI_Allreduce(&e, &all, 1, MPI_DOUBLE, MPI_SUM, world);
   energy_at = ncompute;
@@ -536,6 +1033,8 @@ void FixMdgranChain::grow_arrays(int nmax)
   memory->grow(closed, nmax, "mdgran/chain:closed");
   memory->grow(dprev, nmax, "mdgran/chain:dprev");
   memory->grow(aprev, nmax, "mdgran/chain:aprev");
+  memory->grow(xs, nmax, "mdgran/chain:xs");
+  memory->grow(vs, nmax, "mdgran/chain:vs");
   vector_atom = closed;
 }
 
@@ -545,6 +1044,8 @@ void FixMdgranChain::copy_arrays(int i, int j, int /*delflag*/)
   closed[j] = closed[i];
   dprev[j] = dprev[i];
   aprev[j] = aprev[i];
+  xs[j] = xs[i];
+  vs[j] = vs[i];
 }
 
 int FixMdgranChain::pack_exchange(int i, double *buf)
@@ -553,7 +1054,9 @@ int FixMdgranChain::pack_exchange(int i, double *buf)
   buf[1] = closed[i];
   buf[2] = dprev[i];
   buf[3] = aprev[i];
-  return NPERATOM;
+  buf[4] = xs[i];
+  buf[5] = vs[i];
+  return NEXCHANGE;
 }
 
 int FixMdgranChain::unpack_exchange(int nlocal, double *buf)
@@ -562,13 +1065,18 @@ int FixMdgranChain::unpack_exchange(int nlocal, double *buf)
   closed[nlocal] = buf[1];
   dprev[nlocal] = buf[2];
   aprev[nlocal] = buf[3];
-  return NPERATOM;
+  xs[nlocal] = buf[4];
+  vs[nlocal] = buf[5];
+  return NEXCHANGE;
 }
 
 int FixMdgranChain::pack_restart(int i, double *buf)
 {
   buf[0] = NPERATOM + 1;    // values of this fix, this count included
-  pack_exchange(i, &buf[1]);
+  buf[1] = x0[i];
+  buf[2] = closed[i];
+  buf[3] = dprev[i];
+  buf[4] = aprev[i];
   return NPERATOM + 1;
 }
 
@@ -577,7 +1085,13 @@ void FixMdgranChain::unpack_restart(int nlocal, int nth)
   double **extra = atom->extra;
   int m = 0;    // skip the values of the fixes stored before this one
   for (int k = 0; k < nth; k++) m += static_cast<int>(extra[nlocal][m]);
-  unpack_exchange(nlocal, &extra[nlocal][m + 1]);
+  const double *buf = &extra[nlocal][m + 1];
+  x0[nlocal] = buf[0];
+  closed[nlocal] = buf[1];
+  dprev[nlocal] = buf[2];
+  aprev[nlocal] = buf[3];
+  xs[nlocal] = atom->x[nlocal][0];
+  vs[nlocal] = atom->v[nlocal][0];
 }
 
 int FixMdgranChain::size_restart(int /*nlocal*/)
@@ -590,10 +1104,14 @@ int FixMdgranChain::maxsize_restart()
   return NPERATOM + 1;
 }
 
-// global state: totals of this rank (rank 0 writes; every rank reads, rank 0 keeps the sums)
+// global state: totals over the ranks (every rank calls this; rank 0 writes; every rank
+// reads, rank 0 keeps the sums: the damping power of the last step is a sum over the ranks'
+// contacts, and the trapezoid of the next step adds it once)
 void FixMdgranChain::write_restart(FILE *fp)
 {
-  double list[5] = {d_hyst_all + d_hyst, d_visc_all + d_visc, power_prev, (double) last_step,
+  double part[3] = {d_hyst, d_visc, power_prev}, sum[3] = {d_hyst, d_visc, power_prev};
+  if (comm->nprocs > 1) MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
+  double list[5] = {d_hyst_all + sum[0], d_visc_all + sum[1], sum[2], (double) last_step,
                     (double) have_last};
   if (comm->me == 0) {
     int size = sizeof(list);
@@ -607,7 +1125,7 @@ void FixMdgranChain::restart(char *buf)
   auto list = (double *) buf;
   d_hyst_all = list[0];
   d_visc_all = list[1];
-  power_prev = comm->me == 0 ? list[2] : 0.0;    // summed over ranks at the next step
+  power_prev = comm->me == 0 ? list[2] : 0.0;    // rank 0 holds the sum over the ranks
   last_step = (bigint) list[3];
   have_last = (int) list[4];
   d_hyst = d_visc = 0.0;
@@ -622,6 +1140,10 @@ int FixMdgranChain::pack_forward_comm(int n, int *list, double *buf, int /*pbc_f
     buf[m++] = x0[j];
     buf[m++] = closed[j];
     buf[m++] = aprev[j];
+    if (located) {
+      buf[m++] = xs[j];
+      buf[m++] = vs[j];
+    }
   }
   return m;
 }
@@ -633,12 +1155,16 @@ void FixMdgranChain::unpack_forward_comm(int n, int first, double *buf)
     x0[i] = buf[m++];
     closed[i] = buf[m++];
     aprev[i] = buf[m++];
+    if (located) {
+      xs[i] = buf[m++];
+      vs[i] = buf[m++];
+    }
   }
 }
 
 double FixMdgranChain::memory_usage()
 {
-  return (double) atom->nmax * NPERATOM * sizeof(double) +
-      nmax_scratch * (3 * sizeof(double) + sizeof(int)) +
+  return (double) atom->nmax * NEXCHANGE * sizeof(double) +
+      nmax_scratch * (6 * sizeof(double) + sizeof(int)) +
       (ev_all.size() + ev_local.size()) * sizeof(Event) + tab_coef.size() * sizeof(double);
 }

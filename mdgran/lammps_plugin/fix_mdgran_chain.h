@@ -18,6 +18,7 @@ class FixMdgranChain : public Fix {
   int setmask() override;
   void init() override;
   void setup(int) override;
+  void initial_integrate(int) override;
   void post_force(int) override;
   void post_run() override;
 
@@ -41,6 +42,7 @@ class FixMdgranChain : public Fix {
 
   // ---- the contact law (public: the unit test calls them through a tiny driver) ----------
   double law_force(double delta) const;     // attached branch, exact (Newton) or table
+  double mean_force(double d0, double d1) const;    // (V(d1) - V(d0)) / (d1 - d0), Schwarz
   double law_energy(double delta) const;    // V(delta) on the attached branch, exact
   double exact_force(double delta) const;
   // cubic spline in w = sqrt(delta - base), as ContactTable.force (Horner, highest power first)
@@ -73,11 +75,16 @@ class FixMdgranChain : public Fix {
   double *closed;                           // 1.0 closed, 0.0 open (contact tag -> tag + 1)
   double *dprev;                            // that contact's delta at the previous step
   double *aprev;                            // the atom's acceleration at the previous step
+                                            // (located: at the start of the (sub)step)
+  double *xs, *vs;                          // located: x and v at the start of the (sub)step
   // scratch
   double *fcon;                             // force of the contact to the right
   double *u, *w;                            // displacement, velocity estimate
   int *left;                                // local index of the left neighbour (-1: none)
+  double *fkick;                            // located: kick force of the contact to the right
+  double *anew, *akick;                     // located: acceleration and kick at the pass end
   int nmax_scratch;
+  void ensure_scratch();
 
   // step bookkeeping (as the Python hook)
   bigint last_step;
@@ -97,6 +104,36 @@ class FixMdgranChain : public Fix {
   };
   std::vector<Event> ev_local;              // since the last sync, this rank
   std::vector<Event> ev_all;                // every event so far, all ranks, in order
+
+  // ---- located events (events located): the fix integrates the chain itself --------------
+  int located;                              // 1: events located inside the step; 0: quantized
+  double sing;                              // mean-force kick below this delta (else -inf)
+  struct Con {
+    int l, r, own;                          // local left and right atom; own: left is owned
+  };
+  std::vector<Con> cons;                    // contacts this rank evaluates
+  std::vector<int> flagged;                 // indices into cons: a possible event in the pass
+  std::vector<double> roots;                // their first roots
+  std::vector<int> switching;               // indices into cons: switch at the event
+  void build_contacts();
+  double located_force(double d) const;
+  double located_pass(double h);
+  void drift(double h);
+  void kick(double h);
+  void start_substep();
+  void located_step();
+  void located_setup();
+  double first_root(const Con &c, double h) const;
+  double earliest_event(double h, double tol);
+  void switch_contact(const Con &c, double time);
+  void settle(std::vector<int> &list, double time);
+  void add_force_to_lammps();
+  void add_visc(double dv);
+  void add_event(const Con &c, int kind, double time, double lost);
+  inline double ustart(int i) const;         // displacement at the substep start (walls: 0)
+  inline double vstart(int i) const;         // velocity at the substep start (walls: 0)
+  inline double astart(int i) const;         // acceleration at the substep start (walls: 0)
+  inline int moves(int i) const;             // in the fix group and not a wall
 
   double t_of_delta(double delta) const;
   double antiderivative(double t) const;

@@ -1,0 +1,217 @@
+"""The native contact's located-events mode (``fix mdgran/chain ... events located``).
+
+The fix integrates the chain itself (velocity Verlet), locates each snap event inside the step
+and splits the step there, as the fast backend does: second order in dt through events.  Checked
+against the reference backend (event-driven, tolerance 1e-12): the error shrinks ~4x when dt
+halves, the events are the reference's, the ledger closes to the fast backend's level; 1 and 2
+MPI ranks agree.  (The quantized mode against the hook, bitwise: tests/test_lammps_plugin.py.)
+"""
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mdgran import native_plugin
+from mdgran.scene import SceneError, load_scene
+from mdgran.simulation import make_backend, run
+
+pytestmark = pytest.mark.lammps
+
+
+@pytest.fixture(scope="module")
+def plugin():
+    try:
+        return native_plugin.plugin_path()
+    except native_plugin.PluginUnavailable as exc:  # pragma: no cover - CI has g++
+        pytest.fail(f"the plugin is missing where the install should have built it: {exc}")
+
+
+def located(scene, dt=None, **options):
+    if dt is not None:
+        options["dt"] = dt
+    res = run(scene, "lammps", contact="native", events="located", **options)
+    assert res.status == "complete"
+    return res
+
+
+def events(res):
+    t = res.trajectory
+    return list(zip(t.ev_contact.tolist(), t.ev_kind.tolist())), np.asarray(t.ev_time)
+
+
+def test_options_and_order(plugin):
+    sc = load_scene("micro-star", [("run.duration", 1.0)])
+    b = make_backend(sc, "lammps", contact="native")
+    assert b.event_mode == "located" and b.order == 2  # the native default
+    assert b.refinement(sc)[1] == pytest.approx(4.0 / 3.0)
+    assert make_backend(sc, "lammps:native:quantized").order == 1
+    assert make_backend(sc, "lammps").order == 1  # the hook: quantized only
+    for bad, words in ((dict(contact="hook", events="located"), "needs contact='native'"),
+                       (dict(contact="native", events="exact"), "'located' or 'quantized'")):
+        with pytest.raises(SceneError) as exc:
+            make_backend(sc, "lammps", **bad)
+        assert exc.value.key == "events" and words in str(exc.value)
+
+
+def contact_phase(res):
+    """(contact duration, rebound speed) of collision-pair: from the close to the open event,
+    and the pair's relative speed at the end (the beads have separated)."""
+    (kinds, times) = events(res)
+    assert [k for _, k in kinds] == [1, 0]  # close, then open
+    v = res.trajectory.v[-1]
+    return times[1] - times[0], abs(v[1] - v[0])
+
+
+def test_collision_pair_second_order(plugin):
+    """Contact duration and rebound speed against the reference: error / 4 when dt halves."""
+    sc = load_scene("collision-pair", [("run.duration", 10.0)])
+    ref = contact_phase(run(sc, "reference", tolerance=1e-12))
+    dt0 = float(sc.data["run"]["dt"])
+    errs = [np.abs(np.subtract(contact_phase(located(sc, dt0 / k)), ref)) for k in (1, 2, 4)]
+    for coarse, fine in zip(errs, errs[1:]):
+        ratio = coarse / fine
+        assert np.all((3.3 < ratio) & (ratio < 4.7)), ratio  # measured 3.8-4.0
+    assert np.all(errs[0] < 1e-3 * np.abs(ref))
+
+
+def test_micro_star_second_order_and_events(plugin):
+    """Positions against the reference over 20 time units (a snap-off at t = 0.034 and one at
+    16.57): the error shrinks 4x per halving of dt (measured 1.12e-4, 2.80e-5, 6.99e-6), the
+    events are the reference's, their times within the same second-order error."""
+    sc = load_scene("micro-star", [("run.duration", 20.0)])
+    ref = run(sc, "reference", tolerance=1e-12)
+    ref_kinds, ref_times = events(ref)
+    dt0 = float(sc.data["run"]["dt"])
+    errs = []
+    for k in (1, 2, 4):
+        res = located(sc, dt0 / k)
+        kinds, times = events(res)
+        assert kinds == ref_kinds and len(kinds) == 2
+        assert np.abs(times - ref_times).max() < 1e-5 / k**2  # measured 4.1e-6 / k^2
+        errs.append(np.abs(res.trajectory.x - ref.trajectory.x).max())
+    assert 3.5 < errs[0] / errs[1] < 4.5 and 3.5 < errs[1] / errs[2] < 4.5, errs
+
+
+def test_micro_star_ledger_at_the_default_dt(plugin):
+    """The whole micro-star run (t = 400) at its dt: ledger error <= 2e-5 of E_imp, the fast
+    backend's level (the quantized mode: ~1e-3), within the declared bound."""
+    res = located(load_scene("micro-star"))
+    assert res.max_ledger_error <= 2e-5
+    assert res.max_ledger_error <= res.ledger_bound
+    quantized = run(load_scene("micro-star", [("run.duration", 100.0)]), "lammps",
+                    contact="native", events="quantized")
+    assert quantized.max_ledger_error > 10 * res.max_ledger_error  # located is the better one
+
+
+def test_macro_hertz_against_reference(plugin):
+    """Hertz (delta_off = 0, contacts resting at delta = 0 ahead of the pulse): the same 46
+    events as the reference to t = 20, and second-order convergence."""
+    sc = load_scene("macro-hertz", [("run.duration", 20.0)])
+    ref = run(sc, "reference", tolerance=1e-12)
+    dt0 = float(sc.data["run"]["dt"])
+    a, b = located(sc), located(sc, dt0 / 2)
+    assert events(a)[0] == events(ref)[0] == events(b)[0]
+    ea = np.abs(a.trajectory.x - ref.trajectory.x).max()
+    eb = np.abs(b.trajectory.x - ref.trajectory.x).max()
+    assert 3.5 < ea / eb < 4.5 and ea < 2e-4  # measured 1.07e-4, ratio 3.99
+
+
+SPREAD = """
+plugin load {plugin}
+units lj
+atom_style atomic
+atom_modify map array sort 0 0.0
+boundary m f f
+comm_modify vel yes cutoff 6.0
+lattice sc 1.0
+region box block -0.5 201.5 -0.5 0.5 -0.5 0.5 units lattice
+create_box 1 box
+create_atoms 1 box
+mass 1 1.0
+pair_style none
+group wall id 1 202
+group mobile subtract all wall
+group struck id 100
+fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 k3 0.002 &
+    walls yes events located
+fix_modify contact energy yes
+fix line all setforce NULL 0.0 0.0
+velocity struck set 12.0 0.0 0.0 units box
+timestep 0.0025
+thermo_style custom step ke pe f_contact[1] f_contact[2] f_contact[3]
+thermo_modify norm no format float %.17g
+thermo 1200
+run 1200
+write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
+"""
+
+
+def test_one_and_two_ranks_agree(plugin, tmp_path):
+    """200 beads over 2 ranks with a ghost cut-off of 6 (a few ghosts per rank), bead 100
+    struck: snap-offs split the step on both ranks at the global earliest event; the same
+    positions, velocities, events and energies as on 1 rank (round-off)."""
+    script = tmp_path / "spread.in"
+    script.write_text(SPREAD.format(plugin=plugin))
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
+    thermo = {}
+    for tag, cmd in {"one": [lmp], "two": [mpiexec, "-n", "2", lmp]}.items():
+        out = subprocess.run([*cmd, "-var", "tag", tag, "-in", str(script)], cwd=tmp_path,
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+        rows = [ln.split() for ln in out.stdout.splitlines() if ln.strip().startswith("1200 ")]
+        thermo[tag] = [float(v) for v in rows[-1][1:]]
+        if tag == "two":
+            assert 0 < float(out.stdout.split("Nghost:")[1].split()[0]) < 10
+    a = np.loadtxt(tmp_path / "final.one", skiprows=9)
+    b = np.loadtxt(tmp_path / "final.two", skiprows=9)
+    assert np.abs(a - b).max() <= 1e-12
+    assert thermo["two"][4] == thermo["one"][4] >= 2  # events (a snap-off on each side)
+    np.testing.assert_allclose(thermo["two"], thermo["one"], rtol=1e-12)
+    # the ledger: E0 = 72 = ke + pe (contact + substrate, the fix's) + D_hyst + D_visc
+    assert sum(thermo["one"][:4]) == pytest.approx(72.0, rel=2e-5)
+
+
+def test_located_refuses_a_second_integrator(plugin, tmp_path):
+    """With events located the fix moves the atoms: a fix nve (or spring/self) beside it is
+    refused in one line naming the fix to remove."""
+    script = tmp_path / "twice.in"
+    script.write_text(SPREAD.format(plugin=plugin).replace(
+        "fix line all", "fix move mobile nve\nfix line all"))
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    out = subprocess.run([lmp, "-var", "tag", "x", "-in", str(script)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode != 0
+    assert "integrates the chain itself: unfix move" in out.stdout + out.stderr
+
+
+def test_restart_and_split_runs_continue_bitwise(plugin, tmp_path):
+    """A located run continued from a restart file, and one run in two pieces, are the
+    uninterrupted run bit for bit (the stored accelerations and damping power carry over)."""
+    small = SPREAD.format(plugin=plugin).replace("201.5", "41.5").replace(
+        "id 1 202", "id 1 42").replace("id 100", "id 2")  # 40 beads, bead 1 struck
+    head, setup = small.split("pair_style none\n")
+    head += "pair_style none\n"
+    setup = setup.split("velocity")[0]  # groups, fixes
+    tail = ("thermo_style custom step f_contact[1] f_contact[2]\n"
+            "thermo_modify norm no format float %.17g\n")
+    velocity = "velocity struck set 12.0 0.0 0.0 units box\ntimestep 0.0025\n"
+    dump = "write_dump all custom final.{} id x vx modify sort id format float %.17g\n"
+    (tmp_path / "a.in").write_text(head + setup + velocity + tail + "run 1000\n"
+                                   "write_restart half.restart\nrun 1000\n" + dump.format("a"))
+    (tmp_path / "b.in").write_text("read_restart half.restart\nplugin load " + str(plugin) +
+                                   "\ncomm_modify vel yes cutoff 6.0\npair_style none\n" + setup +
+                                   "timestep 0.0025\n" + tail + "run 1000\n" + dump.format("b"))
+    (tmp_path / "c.in").write_text(head + setup + velocity + tail + "run 2000\n" +
+                                   dump.format("c"))
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    for name in "abc":
+        out = subprocess.run([lmp, "-var", "tag", name, "-in", f"{name}.in"], cwd=tmp_path,
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    a, b, c = (np.loadtxt(tmp_path / f"final.{k}", skiprows=9) for k in "abc")
+    assert np.array_equal(a, b) and np.array_equal(a, c)
+    assert np.abs(a[1:-1, 1] - np.arange(1, 41)).max() > 0.1  # the chain has moved
