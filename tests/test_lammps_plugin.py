@@ -48,7 +48,7 @@ def same_run(a, b, atol=1e-12):
 def test_native_matches_hook(plugin, name, options):
     sc = load_scene(name, [("run.duration", 20.0)])
     hook = run(sc, "lammps", **options)
-    native = run(sc, "lammps", contact="native", **options)
+    native = run(sc, "lammps", contact="native", events="quantized", **options)
     assert native.stats["method"].endswith("native contact (fix mdgran/chain)")
     assert len(hook.trajectory.ev_kind) > 0
     same_run(hook, native)
@@ -58,14 +58,16 @@ def test_native_matches_hook_cubic_substrate_and_resorting(plugin):
     """k3 and force-rule snap-off; LAMMPS re-sorting its atoms every step changes nothing."""
     sc = load_scene("hard/jkr-force", [("run.duration", 8.0), ("substrate.k3", 0.05)])
     hook = run(sc, "lammps")
-    native = run(sc, "lammps", contact="native", extra_commands=["atom_modify sort 1 0.01"])
+    native = run(sc, "lammps", contact="native", events="quantized",
+                 extra_commands=["atom_modify sort 1 64.0"])
     same_run(hook, native)
 
 
 def test_native_ledger_closes(plugin):
     """Over 60 time units the native run's ledger holds within the hook's bound (first order in
     dt through the quantized snap events: measured 2.5e-5 of E_imp at dt = 0.0025)."""
-    res = run(load_scene("micro-star", [("run.duration", 60.0)]), "lammps", contact="native")
+    res = run(load_scene("micro-star", [("run.duration", 60.0)]), "lammps", contact="native",
+              events="quantized")
     assert res.status == "complete"
     assert res.max_ledger_error < 3e-3
     assert len(res.trajectory.ev_kind) >= 2
@@ -140,7 +142,7 @@ write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
 
 
 def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
-    """mpiexec -n 2 with the backend's input (fix balance splits the atoms): as serial."""
+    """mpiexec -n 2 with the backend's input (one slab of the chain per rank): as serial."""
     code = ("import sys; from mdgran.scene import load_scene; from mdgran.simulation import run; "
             "run(load_scene('micro-star', [('run.duration', 2.0)]), 'lammps', "
             "contact='native', out=sys.argv[1], checkpoint_every=None)")

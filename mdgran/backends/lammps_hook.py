@@ -1,0 +1,355 @@
+"""The inner loop of the LAMMPS backend's Python contact hook, compiled with numba.
+
+One call of :func:`contact_step` does, for one MPI rank, what ``fix mdgran/chain`` of the C++
+plugin (``mdgran/lammps_plugin/fix_mdgran_chain.cpp``) does in ``compute``: the same
+floating-point operations in the same order, so that the hook and the native contact agree
+bitwise in the step-quantized mode they share.  Units: mdgran's nondimensional ones (mass 1,
+length p, force eta, time 1/q, energy eta p).
+
+Per-atom data (LAMMPS local index ``i``, owned ``i < nlocal``, ghosts after; ``fix
+property/atom`` arrays that migrate with the atoms):
+
+* ``x0[i]``      initial x of the atom: displacement ``u = x - x0`` (walls: ``u = 0``, ``v = 0``);
+* ``closed[i]``  state of the contact to the atom's right (tags ``tag``, ``tag + 1``), 1 closed;
+* ``dprev[i]``   that contact's compression at the previous step (owner of the left atom only);
+* ``aprev[i]``   the atom's acceleration at the previous step (ghosts: exchanged every call).
+
+Per contact ``k`` (left atom tag ``k``, right ``k + 1``; compression
+``delta = u_k - u_(k+1) - gap``, rate ``u'_k - u'_(k+1)`` from ``v(t + dt/2) + dt/2 a(t)``):
+
+* at a new step, a closed contact with ``delta <= delta_off`` opens, an open one with
+  ``delta >= 0`` closes (strict inequalities where ``delta_off = 0``); the owner of the left
+  atom records the event with its time interpolated linearly in ``delta`` within the step
+  and, on opening, the energy ``V(delta)`` lost to hysteresis;
+* a closed contact's force ``F = f(delta) + c rate`` (``f`` from the spline table of
+  :class:`mdgran.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the right
+  atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3``.
+
+A rank evaluates the contacts whose left atom it owns (partner owned or ghost) and those whose
+right atom it owns with a ghost left atom, the latter on the ghost's copy of the state: both
+ranks of a straddling contact update it from identical positions, so they switch identically.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+NEWTON_STEPS = 7  # as mdgran/contact.py
+
+# indices of the float parameters (``par``) and of the integer ones (``ipar``)
+P_GAP, P_DAMPING, P_K1, P_K3, P_DT, P_DELTA_OFF = 0, 1, 2, 3, 4, 5
+P_FC, P_SIGMA, P_TM, P_BIG, P_SQRT_BIG, P_DELTA_MIN, P_P0 = 6, 7, 8, 9, 10, 11, 12
+P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX = 13, 14, 15, 16, 17
+NPAR = 18
+I_WALLS, I_NTAGS, I_STRICT, I_HERTZ, I_TABLE = 0, 1, 2, 3, 4
+NIPAR = 5
+
+# error codes of contact_step (returned with the local index or tag they concern)
+OK, NON_FINITE, BEYOND_TABLE, PARTNER_MISSING = 0, 1, 2, 3
+
+
+def parameters(model, law, table, dt):
+    """``(par, ipar)`` of :func:`contact_step` for a chain model, its law and (optional) table.
+
+    The law's constants are taken from :class:`mdgran.contact.ContactLaw` itself (the same
+    Python floats its numpy methods use), ``P_P0`` is ``P(t0)``, the energy's constant."""
+    par = np.zeros(NPAR)
+    ipar = np.zeros(NIPAR, dtype=np.int64)
+    par[P_GAP] = float(model.gap)
+    par[P_DAMPING] = float(model.damping)
+    par[P_K1] = float(model.k1)
+    par[P_K3] = float(model.k3)
+    par[P_DT] = float(dt)
+    par[P_DELTA_OFF] = float(law.delta_off)
+    hertz = law.kind == "hertz"
+    if not hertz:
+        tm = law.t_min
+        par[P_FC], par[P_SIGMA], par[P_TM] = law.fc, law.sigma, tm
+        par[P_BIG] = 6.0 * tm * tm
+        par[P_SQRT_BIG] = math.sqrt(6.0 * tm * tm)
+        par[P_DELTA_MIN] = law.delta_min
+        par[P_P0] = float(law._antiderivative((4.0 * law.sigma) ** (1.0 / 3.0)))
+    if table is not None:
+        par[P_BASE], par[P_SCALE], par[P_H] = table.base, table._scale, table._h
+        par[P_TOP] = table.n - 1 - 1e-9  # as ContactTable._locate
+        par[P_DELTA_MAX] = table.delta_max
+    ipar[I_WALLS] = int(bool(model.walls))
+    ipar[I_NTAGS] = model.n + 2 if model.walls else model.n
+    ipar[I_STRICT] = int(law.delta_off == 0.0)
+    ipar[I_HERTZ] = int(hertz)
+    ipar[I_TABLE] = int(table is not None)
+    return par, ipar
+
+
+# ---- the law ---------------------------------------------------------------------------------
+
+@njit(cache=True)
+def spline_force(coef, par, d):
+    """Cubic spline in ``w = sqrt(delta - base)``: ``ContactTable.force`` for one value."""
+    w = math.sqrt(max(d - par[P_BASE], 0.0))
+    s = min(w * par[P_SCALE], par[P_TOP])
+    i = int(s)
+    x = (s - i) * par[P_H]
+    return ((coef[i, 0] * x + coef[i, 1]) * x + coef[i, 2]) * x + coef[i, 3]
+
+
+@njit(cache=True)
+def t_of_delta(par, d):
+    """``ContactLaw.t_of_delta``: Newton on ``sqrt(delta - delta_min)`` (7 steps)."""
+    tm = par[P_TM]
+    big = par[P_BIG]
+    rhs = math.sqrt(max(d - par[P_DELTA_MIN], 0.0))
+    if tm == 0.0:  # DMT: phi(w) = w^2
+        return math.sqrt(rhs)
+    w = min(rhs / par[P_SQRT_BIG], math.sqrt(rhs))
+    for _ in range(NEWTON_STEPS):
+        sq = math.sqrt(w * w + 4.0 * tm * w + big)
+        w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq)
+    return tm + max(w, 0.0)
+
+
+@njit(cache=True)
+def exact_force(par, ipar, d):
+    """``ContactLaw.force``: ``delta_+^(3/2)`` (Hertz) or ``fc + (t^3 - 3 sigma)^2``."""
+    if ipar[I_HERTZ]:
+        dp = max(d, 0.0)
+        return dp * math.sqrt(dp)
+    u = math.pow(t_of_delta(par, d), 3.0) - 3.0 * par[P_SIGMA]
+    return par[P_FC] + u * u
+
+
+@njit(cache=True)
+def law_energy(par, ipar, d):
+    """``ContactLaw.energy``: ``(2/5) delta_+^(5/2)`` (Hertz) or ``P(t(delta)) - P(t0)``."""
+    if ipar[I_HERTZ]:
+        dp = max(d, 0.0)
+        return 0.4 * dp * dp * math.sqrt(dp)
+    t = t_of_delta(par, d)
+    sg, fc = par[P_SIGMA], par[P_FC]
+    p = (0.4 * math.pow(t, 10.0) - 4.0 * sg * math.pow(t, 7.0)
+         + (fc + 15.0 * sg * sg) * math.pow(t, 4.0) - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
+    return p - par[P_P0]
+
+
+# ---- atoms by tag ----------------------------------------------------------------------------
+
+@njit(cache=True)
+def build_map(tag, nall, tmap):
+    """``tmap[tag] = local index`` for owned and ghost atoms (owned ones win).  Entries of
+    atoms no longer here are left stale: :func:`find` checks them against ``tag``."""
+    for i in range(nall - 1, -1, -1):
+        tmap[tag[i]] = i
+
+
+@njit(cache=True)
+def find(tag, nall, tmap, t):
+    """Local index of the atom with tag ``t``, -1 if this rank does not see it."""
+    if t < 1 or t >= tmap.shape[0]:
+        return -1
+    i = tmap[t]
+    if 0 <= i < nall and tag[i] == t:
+        return i
+    return -1
+
+
+@njit(cache=True)
+def boundary_atoms(tag, nlocal, nall, tmap, out):
+    """Owned atoms next (by tag) to a ghost atom: their ``aprev`` is needed on the ghost's
+    rank.  Local indices in ``out[:count]`` (an atom between two ghosts twice); returns
+    ``count``.  Loops over the ghosts only (a few per rank)."""
+    n = 0
+    for g in range(nlocal, nall):
+        for t in (tag[g] - 1, tag[g] + 1):
+            i = find(tag, nall, tmap, t)
+            if 0 <= i < nlocal:
+                out[n] = i
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def pack_aprev(tag, aprev, idx, count, buf):
+    for k in range(count):
+        buf[2 * k] = tag[idx[k]]
+        buf[2 * k + 1] = aprev[idx[k]]
+
+
+@njit(cache=True)
+def unpack_aprev(tag, nlocal, nall, tmap, aprev, buf):
+    """Ghost copies of ``aprev`` from the ``(tag, aprev)`` pairs every rank sent."""
+    for k in range(buf.shape[0] // 2):
+        j = find(tag, nall, tmap, int(buf[2 * k]))
+        if j >= nlocal:
+            aprev[j] = buf[2 * k + 1]
+
+
+# ---- one step --------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev):
+    """Event of contact ``l`` at this step (rare: out of the hot loop): its time by linear
+    interpolation of ``delta`` within the step and, on opening, the energy lost."""
+    dt = par[P_DT]
+    t = step * dt
+    prev = dprev[l] if have_last else delta
+    thr = par[P_DELTA_OFF] if opening else 0.0
+    span = prev - delta
+    frac = (prev - thr) / span if span != 0.0 else 1.0
+    te = t - dt + min(max(frac, 0.0), 1.0) * dt if step > 0 else t
+    events[nev, 0] = l
+    events[nev, 1] = 0.0 if opening else 1.0
+    events[nev, 2] = te
+    events[nev, 3] = law_energy(par, ipar, delta) if opening else 0.0
+    return nev + 1
+
+
+@njit(cache=True)
+def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
+                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, events):
+    """Forces of the contacts on this rank's atoms into ``fext`` (x column; y, z zeroed) and,
+    at a new step, state switches, ``aprev`` of owned atoms and this rank's events.
+
+    ``tmap`` must hold the current atoms (:func:`build_map`); ``u, w, fcon`` (``>= nall``),
+    ``left`` (``>= nlocal``), ``pairs`` (``>= nall`` rows of 2) are scratch; ``events``
+    (``>= nlocal`` rows) receives ``[local index of the left atom, kind (1 close, 0 open), time,
+    energy lost]``.  Returns ``(number of events, damping power c sum rate^2 over this rank's
+    contacts, error code, its local index, its value)``.
+
+    The contacts are listed first, then evaluated in one loop that calls only small functions
+    (the compiler inlines them) or, for an event, :func:`_record`: a call the compiler does not
+    inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns per
+    contact, three times the contact's own work."""
+    walls = ipar[I_WALLS]
+    ntags = ipar[I_NTAGS]
+    dt = par[P_DT]
+    use_est = step > 0 and have_last
+    # 0. displacement and velocity estimate v(t + dt/2) + dt/2 a(t) of owned and ghost atoms
+    for i in range(nall):
+        t = tag[i]
+        if walls and (t == 1 or t == ntags):
+            u[i] = 0.0
+            w[i] = 0.0
+        else:
+            u[i] = x[i, 0] - x0[i]
+            w[i] = v[i, 0] + 0.5 * dt * aprev[i] if use_est else v[i, 0]
+    # 1. the contacts: first those whose left atom is owned (own = the events and the damping
+    # power are this rank's), noting the left neighbour of each owned right atom; then those
+    # whose left atom is a ghost and right atom owned (updated on the ghost's copy)
+    nmap = tmap.shape[0]
+    for i in range(nlocal):
+        left[i] = -1
+    npair = 0
+    for i in range(nlocal):
+        fcon[i] = 0.0
+        t = tag[i] + 1
+        if t > ntags:  # last atom: no contact to its right
+            continue
+        j = tmap[t] if t < nmap else -1
+        if j < 0 or j >= nall or tag[j] != t:  # beyond the ghost cut-off: only if open
+            if closed[i] != 0:
+                return 0, 0.0, PARTNER_MISSING, i, 0.0
+            continue
+        if j < nlocal:
+            left[j] = i
+        pairs[npair, 0] = i
+        pairs[npair, 1] = j
+        npair += 1
+    nown = npair
+    for i in range(nlocal):
+        if left[i] >= 0 or tag[i] <= 1:
+            continue
+        t = tag[i] - 1
+        l = tmap[t]
+        if l < 0 or l >= nall or tag[l] != t:
+            l = -1  # beyond the cut-off, so open (its owner checks)
+        left[i] = l
+        if l >= nlocal:
+            fcon[l] = 0.0
+            pairs[npair, 0] = l
+            pairs[npair, 1] = i
+            npair += 1
+    # 2. each contact: state update at a new step, then its force into fcon[left atom]
+    gap, damping, delta_off = par[P_GAP], par[P_DAMPING], par[P_DELTA_OFF]
+    strict, table = ipar[I_STRICT], ipar[I_TABLE]
+    nev = 0
+    power = 0.0
+    for k in range(npair):
+        l = pairs[k, 0]
+        r = pairs[k, 1]
+        own = k < nown
+        delta = u[l] - u[r]
+        if gap != 0.0:
+            delta = delta - gap
+        rate = w[l] - w[r]
+        if new_step:
+            c = closed[l] != 0
+            if strict:
+                opening = c and delta < 0.0
+                closing = (not c) and delta > 0.0
+            else:
+                opening = c and delta <= delta_off
+                closing = (not c) and delta >= 0.0
+            if opening or closing:
+                if own:
+                    nev = _record(l, opening, delta, step, have_last, par, ipar, dprev, events,
+                                  nev)
+                closed[l] = 0 if opening else 1
+            if own:
+                dprev[l] = delta
+        if table and delta > par[P_DELTA_MAX]:
+            return nev, power, BEYOND_TABLE, l, delta
+        F = 0.0
+        if closed[l] != 0:
+            if not math.isfinite(delta):
+                F = math.nan
+            elif table:
+                F = spline_force(coef, par, delta)
+            else:
+                F = exact_force(par, ipar, delta)
+            if damping != 0.0:
+                F = F + damping * rate
+                if own and new_step:
+                    power += rate * rate
+        fcon[l] = F
+    # 3. forces on owned atoms: x'' = F_left - F_right - k3 u^3 (- k1 u: fix spring/self)
+    k1, k3 = par[P_K1], par[P_K3]
+    for i in range(nlocal):
+        ext = 0.0
+        t = tag[i]
+        if not (walls and (t == 1 or t == ntags)):
+            fl = fcon[left[i]] if left[i] >= 0 else 0.0
+            ext = (0.0 - fcon[i]) + fl
+            if k3 != 0.0:
+                ext = ext - k3 * math.pow(u[i], 3.0)
+        if not math.isfinite(ext):
+            return nev, power, NON_FINITE, i, ext
+        fext[i, 0] = ext
+        fext[i, 1] = 0.0
+        fext[i, 2] = 0.0
+        if new_step:
+            aprev[i] = ext - k1 * u[i] if k1 != 0.0 else ext
+    if damping != 0.0:
+        power = damping * power
+    else:
+        power = 0.0
+    return nev, power, OK, -1, 0.0
+
+
+@njit(cache=True)
+def contact_energy(tag, nlocal, nall, tmap, closed, u, par, ipar):
+    """Energy ``sum V(delta)`` of the closed contacts whose left atom is owned (``u`` as left
+    by :func:`contact_step`), the exact law."""
+    e = 0.0
+    for i in range(nlocal):
+        if closed[i] == 0 or tag[i] >= ipar[I_NTAGS]:
+            continue
+        j = find(tag, nall, tmap, tag[i] + 1)
+        if j < 0:
+            continue
+        delta = u[i] - u[j]
+        if par[P_GAP] != 0.0:
+            delta = delta - par[P_GAP]
+        e += law_energy(par, ipar, delta)
+    return e
