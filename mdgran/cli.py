@@ -371,10 +371,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "any criterion fails)")
     scene_args(s)
     s.add_argument("--out", required=True, help="report folder")
-    s.add_argument("--backends", default="reference,lammps",
+    s.add_argument("--backends", default="reference,lammps,lammps:native",
                    help="comma-separated backend specs, the first is the reference (default "
-                   "reference,lammps); e.g. reference,lammps,lammps:native pits the reference, "
-                   "the LAMMPS hook and the native contact against each other")
+                   "reference,lammps,lammps:native: the reference, the LAMMPS hook and the "
+                   "native contact with located events; see docs/backends.md)")
     s.add_argument("--ensemble", type=int, default=3,
                    help="extra runs per backend with the impulse changed by k x 1e-3, for the "
                    "cluster statistics past the horizon (default 3)")
