@@ -26,6 +26,7 @@ from .checkpoint import CheckpointError
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
 from .run_record import ledger_scale, relative_ledger_error
 from .scene import SceneError
+from .signals import FrameSections
 from .storage import OutputLocked
 
 
@@ -253,16 +254,22 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     term_max = writer.resume_term_max if start is not None else 0.0  # largest |ledger term|
     status, err = "complete", None
     try:
-        for frame in (b.frames(resume=start) if start is not None else b.frames()):
-            led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
-                               frame.dissipated_hysteresis)
-            if e0 is None:
-                e0 = led["total_energy"]
-                scale = ledger_scale(scene.impulse_energy, e0)
-            max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0, scale)))
-            term_max = max(term_max, max(abs(v) for v in led.values()))
-            for r in reps:
-                r.report(frame, led)
+        # a signal while a frame goes to the reporters is held until all have it, so that a
+        # checkpoint (the backend's state at its last frame) matches the frames written
+        with FrameSections() as sections:
+            for frame in (b.frames(resume=start) if start is not None else b.frames()):
+                sections.inside = True
+                led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
+                                   frame.dissipated_hysteresis)
+                if e0 is None:
+                    e0 = led["total_energy"]
+                    scale = ledger_scale(scene.impulse_energy, e0)
+                max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0,
+                                                                 scale)))
+                term_max = max(term_max, max(abs(v) for v in led.values()))
+                for r in reps:
+                    r.report(frame, led)
+                sections.leave()
     except IntegrationError as exc:
         status, err = f"failed: {exc}", str(exc)
     except BaseException:
