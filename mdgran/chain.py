@@ -19,10 +19,12 @@ Terms switched off by the scene (``k1 = 0``, ``k3 = 0``, ``damping = 0``) are no
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from .contact import ContactLaw
+from .contact_scalar import branch_t_ufunc
 
 
 # ---- contact numbering and states: the one place that knows them -----------------------------
@@ -164,7 +166,33 @@ class ChainModel:
 
     def contact_energy(self, x, closed) -> float:
         delta = self.compressions(x)
-        return float(np.sum(np.where(closed, self.law.energy(delta), 0.0)))
+        return float(np.sum(np.where(closed, self.law_energy(delta), 0.0)))
+
+    @cached_property
+    def _schwarz_energy_constants(self) -> tuple:
+        """Constants of :meth:`ContactLaw.energy` for a Schwarz law, computed once (the ledger
+        evaluates the energy at every frame; the law recomputes them at each call):
+        ``(sigma, t_min, delta_min)`` of the branch, the antiderivative's coefficients
+        ``(4 sigma, fc + 15 sigma^2, 4 sigma (fc + 9 sigma^2))`` and its value at ``t0``."""
+        law = self.law
+        sg, fc = law.sigma, law.fc
+        t0 = (4.0 * sg) ** (1.0 / 3.0)
+        coef = (4.0 * sg, fc + 15.0 * sg * sg, 4.0 * sg * (fc + 9.0 * sg * sg))
+        return (sg, law.t_min, law.delta_min), coef, law._antiderivative(t0)
+
+    def law_energy(self, delta):
+        """``law.energy(delta)``: :meth:`ContactLaw.energy` with its constants computed once,
+        the same operations in the same order (so bitwise equal)::
+
+            V = A(t(delta)) - A(t0),  A(t) = 0.4 t^10 - 4 sigma t^7 + (fc + 15 sigma^2) t^4
+                                             - 4 sigma (fc + 9 sigma^2) t
+        """
+        law = self.law
+        if law.kind != "schwarz":
+            return law.energy(delta)
+        branch, (c7, c4, c1), a0 = self._schwarz_energy_constants
+        t = branch_t_ufunc()(np.asarray(delta, dtype=float), *branch)
+        return (0.4 * t**10 - c7 * t**7 + c4 * t**4 - c1 * t) - a0
 
     def substrate_energy(self, x) -> float:
         e = 0.0

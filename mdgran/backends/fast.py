@@ -24,7 +24,10 @@ Frames, events and checkpoints follow the reference backend: a frame at every ou
 (the first at ``t = 0``, after opening contacts that sit on their snap-off point moving
 outward), each with the events since the previous frame (contract numbering); a checkpoint
 is the whole state at the last frame, and a resumed run is bitwise identical to an
-uninterrupted one.
+uninterrupted one.  One call of the compiled loop runs a block of frames (about
+``BLOCK_BEAD_STEPS`` bead-steps, at least one frame) and copies each frame's state into a
+:class:`~mdgran.backends.fast_kernel.FrameBlock`; the frames' ``x``, ``v``, ``closed`` are
+views of its rows, so a small chain's frames cost the Python of building a Frame alone.
 
 Example::
 
@@ -46,6 +49,9 @@ from . import fast_kernel as fk
 from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
 EVENT_BUFFER = 65536
+#: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
+#: frames of 10 steps per call: the per-frame Python work is then building the Frame alone)
+BLOCK_BEAD_STEPS = 1_000_000
 
 
 class FastBackend(Backend):
@@ -107,25 +113,38 @@ class FastBackend(Backend):
         self.ks = fk.new_state(self.model.n_contacts, EVENT_BUFFER)
         self.closed = self.ks.closed
         self.counters = self.ks.counters[0]  # a view: reads and writes go to the kernel's
+        # the two buffers as Beads of [n] views, and one-element views of the counters the
+        # frame loop reads (an element of an array is read ~5x faster than a record's field)
+        self._copies = tuple(fk.Beads(self.buffers.x[c], self.buffers.v[c], self.buffers.a[c])
+                             for c in (0, 1))
+        self._count = {k: self.ks.counters[k] for k in (
+            "current", "step", "status", "events", "substeps", "d_viscous", "d_hysteresis",
+            "power")}
         self._pending: list = []
+        self._last = None
 
     def _current(self) -> fk.Beads:
         """The beads' current state (views of the kernel's buffer)."""
-        c = int(self.counters["current"])
-        return fk.Beads(self.buffers.x[c], self.buffers.v[c], self.buffers.a[c])
+        return self._copies[int(self._count["current"][0])]
 
     def _take_events(self) -> list:
+        """Every event in the log (sorted by time), which is emptied."""
         k = int(self.counters["events"])
-        if k == 0:
-            return []
-        nums = self.model.contact_numbers
-        log = self.ks.log
-        order = np.argsort(log.time[:k], kind="stable")  # quantized: per step, by contact
-        evs = [Event(float(log.time[i]), int(nums[log.contact[i]]),
-                     CLOSE if log.kind[i] == 1 else OPEN) for i in order]
+        evs = self._events(0, k)
         self.counters["events"] = 0
         self.stats["events"] += k
         return evs
+
+    def _events(self, lo: int, hi: int) -> list:
+        """Events ``lo .. hi - 1`` of the log, sorted by time (stable: step-quantized events
+        come per step, by contact)."""
+        if hi <= lo:
+            return []
+        nums = self.model.contact_numbers
+        log = self.ks.log
+        order = lo + np.argsort(log.time[lo:hi], kind="stable")
+        return [Event(float(log.time[i]), int(nums[log.contact[i]]),
+                      CLOSE if log.kind[i] == 1 else OPEN) for i in order]
 
     def _check(self):
         status = int(self.counters["status"])
@@ -162,30 +181,36 @@ class FastBackend(Backend):
         """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
         so a resumed run is bitwise identical), ``closed``, ``d_hyst``, ``i_out``."""
-        return dict(self._snapshot)
-
-    def _snap(self, i_out):
-        now, cnt = self._current(), self.counters
-        y = np.concatenate([now.x, now.v, now.a, [cnt["d_viscous"], cnt["power"]]])
-        self._snapshot = {"t": float(self._out_times[i_out]), "y": y,
-                          "closed": self.closed.copy(), "d_hyst": float(cnt["d_hysteresis"]),
-                          "i_out": int(i_out)}
+        frame, a, power = self._last
+        y = np.concatenate([frame.x, frame.v, a, [frame.dissipated_viscous, power]])
+        return {"t": float(self._out_times[frame.step]), "y": y,
+                "closed": frame.closed.copy(), "d_hyst": frame.dissipated_hysteresis,
+                "i_out": int(frame.step)}
 
     def _frame(self, i_out, t, events) -> Frame:
+        """Frame ``i_out`` at time ``t`` of the current state (copies)."""
         now = self._current()
         x, v = now.x.copy(), now.v.copy()
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
-            bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0]) + 1
-            raise IntegrationError(f"non-finite state at t = {t:.12g}, bead {bad}")
+        self._check_finite(x[None], v[None], [t])
         return Frame(step=int(i_out), time=float(t), x=x, v=v, closed=self.closed.copy(),
-                     dissipated_viscous=float(self.counters["d_viscous"]),
-                     dissipated_hysteresis=float(self.counters["d_hysteresis"]), events=events)
+                     dissipated_viscous=self._count["d_viscous"].item(),
+                     dissipated_hysteresis=self._count["d_hysteresis"].item(), events=events)
+
+    @staticmethod
+    def _check_finite(x, v, times):
+        """IntegrationError at the first of the states ``x[k], v[k]`` (time ``times[k]``) with
+        a non-finite element."""
+        if np.isfinite(x).all() and np.isfinite(v).all():
+            return
+        bad = ~(np.isfinite(x) & np.isfinite(v))
+        k, bead = np.argwhere(bad)[0]
+        raise IntegrationError(f"non-finite state at t = {times[k]:.12g}, bead {bead + 1}")
 
     # ---- main loop ------------------------------------------------------------------------
     def frames(self, resume: dict | None = None):
         """Integrate the scene; yield a Frame at every output time (see the module doc)."""
         wall0 = _time.perf_counter()
-        out_times = self._out_times = self.output_times()  # once: _snap reads it every frame
+        out_times = self._out_times = self.output_times()  # once (checkpoint_state reads it)
         n = self.model.n
         self._alloc()
         cnt = self.counters
@@ -199,8 +224,9 @@ class FastBackend(Backend):
             cnt["power"] = fk.init_acc(self.flags, self.params, now, self.ks)
             self._check()
             i_out = 0
-            self._snap(0)
-            yield self._frame(0, 0.0, self._take_events())
+            frame = self._frame(0, 0.0, self._take_events())
+            self._last = (frame, now.a.copy(), self._count["power"].item())
+            yield frame
         else:
             y = np.asarray(resume["y"], dtype=float)
             now = self._current()
@@ -211,21 +237,56 @@ class FastBackend(Backend):
             i_out = int(resume["i_out"])
             cnt["step"] = i_out * self.steps_per_frame
         try:
-            for i in range(i_out + 1, len(out_times)):
-                target = i * self.steps_per_frame
-                k0 = _time.perf_counter()
-                while cnt["step"] < target:
-                    self.advance(*kernel_args, int(target - cnt["step"]), self.dt)
-                    if cnt["status"] == fk.EVENTS_FULL:
-                        self._pending += self._take_events()
-                    self._check()
-                self.stats["kernel_s"] += _time.perf_counter() - k0
-                events = self._pending + self._take_events()
-                self._pending = []
-                self.stats["steps"] = int(cnt["step"])
-                self.stats["event_substeps"] = int(cnt["substeps"])
-                frame = self._frame(i, out_times[i], events)
-                self._snap(i)
-                yield frame
+            yield from self._frames_from(i_out + 1, out_times, kernel_args)
         finally:
             self.stats["wall_time_s"] = _time.perf_counter() - wall0
+
+    def _frames_from(self, i, out_times, kernel_args):
+        """Frames ``i ..`` to the end: the kernel runs a block of frames per call (about
+        BLOCK_BEAD_STEPS bead-steps), their states copied into a fresh :class:`FrameBlock`
+        (the frames' arrays are views of its rows)."""
+        n, m, spf, stats = self.model.n, self.model.n_contacts, self.steps_per_frame, self.stats
+        status, events = self._count["status"], self._count["events"]
+        per_call = max(1, int(BLOCK_BEAD_STEPS // (n * spf)))
+        clock = _time.perf_counter
+        while i < len(out_times):
+            nframes = min(per_call, len(out_times) - i)
+            block = fk.new_block(nframes, n, m)
+            k0 = clock()
+            done = self.advance(*kernel_args, fk.plain(block), i, nframes, spf, self.dt)
+            stats["kernel_s"] += clock() - k0
+            lo = 0  # the log's events up to the frame before
+            times = out_times[i:i + done].tolist()
+            bad = None  # a non-finite state: the frames before it, then the error
+            try:
+                self._check_finite(block.x[:done], block.v[:done], times)
+            except IntegrationError as exc:
+                bad = exc
+                done = next(k for k in range(done) if not np.all(
+                    np.isfinite(block.x[k]) & np.isfinite(block.v[k])))
+            rows = zip(block.x[:done], block.v, block.closed, block.a,
+                       block.sums[:done].tolist(), block.counts[:done].tolist(), times)
+            for k, (x, v, closed, a, (d_visc, d_hyst, power), (hi, substeps), t) in \
+                    enumerate(rows):
+                evs = self._events(lo, hi)
+                if self._pending:
+                    evs, self._pending = self._pending + evs, []
+                lo = hi
+                stats["steps"] = (i + k) * spf
+                stats["event_substeps"] = substeps
+                frame = Frame(step=i + k, time=t, x=x, v=v, closed=closed,
+                              dissipated_viscous=d_visc, dissipated_hysteresis=d_hyst,
+                              events=evs)
+                self._last = (frame, a, power)
+                yield frame
+            if bad is not None:
+                raise bad
+            if status[0] == fk.EVENTS_FULL:  # the unfinished frame's events so far
+                count = int(events[0])
+                self._pending += self._events(lo, count)
+                lo = count
+            self.counters["events"] = 0
+            stats["events"] += lo
+            if status[0] != fk.OK:
+                self._check()
+            i += done

@@ -53,7 +53,13 @@ variant (cached on disk by numba), so an absent term costs nothing in the loop.
 few arguments that say what they are): :class:`Flags` (the variant), :class:`Params` (the
 run's constants, with the law's :class:`~mdgran.contact_scalar.SchwarzConstants` and the
 :class:`ForceTable`), :class:`Beads` (``x, v, a``), :class:`KernelState` (contact states,
-the :data:`COUNTERS` record, the :class:`EventLog`, scratch lists), all updated in place.
+the :data:`COUNTERS` record, the :class:`EventLog`, scratch lists), all updated in place, and
+:class:`FrameBlock` (the states at the ends of the frames one call of the loop runs).
+
+**Indices.** The bead and contact indices of the pass are unsigned (``np.uint64``): numba
+emits no negative-index wraparound code for them (it does for signed ones it cannot prove
+non-negative).  No fastmath and no FMA contraction: results are bitwise those of the
+operations as written.
 """
 from __future__ import annotations
 
@@ -149,6 +155,26 @@ class KernelState(NamedTuple):
     chatter: np.ndarray  # [CHAT_CAP, 2] (contact, switches) at the current instant
 
 
+class FrameBlock(NamedTuple):
+    """The states at the ends of consecutive frames, written by the loop (:func:`get_kernel`):
+    row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P)``,
+    ``counts[k]`` = ``(counters.events, counters.substeps)`` at that frame."""
+
+    x: np.ndarray  # [K, n]
+    v: np.ndarray  # [K, n]
+    a: np.ndarray  # [K, n]
+    closed: np.ndarray  # [K, m] bool
+    sums: np.ndarray  # [K, 3]
+    counts: np.ndarray  # [K, 2] int64
+
+
+def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
+    """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
+    return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
+                      np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 3)),
+                      np.empty((frames, 2), dtype=np.int64))
+
+
 #: The kernel's counters and running sums (one record).
 COUNTERS = np.dtype([
     ("current", np.int64),  # which buffer of Beads holds the current state
@@ -212,7 +238,8 @@ def spline(table, w):
     c = table.coef
     i = int(w)
     x = (w - i) * table.step
-    return ((c[i, 0] * x + c[i, 1]) * x + c[i, 2]) * x + c[i, 3]
+    k = np.uint64(i)  # an unsigned index: no negative-index wraparound code on c[k, :]
+    return ((c[k, 0] * x + c[k, 1]) * x + c[k, 2]) * x + c[k, 3]
 
 
 @njit(inline="always")
@@ -322,7 +349,9 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
     counters = ks.counters[0]
     closed, flagged = ks.closed, ks.flagged
     xo, vo, ao = old.x, old.v, old.a
-    n = xo.shape[0]
+    # unsigned indices: numba emits no negative-index wraparound code for them
+    n = np.uint64(xo.shape[0])
+    one = np.uint64(1)
     hh = 0.5 * h
     gap, c, doff = params.gap, params.damping, params.delta_off
     nflag = 0
@@ -334,8 +363,8 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
         x_c = xo[0] + h * vh_c
         ve_c = vh_c + hh * ao[0]
     f_l, fv_l = 0.0, 0.0  # force of the contact left of that bead (Fv: for the kick)
-    rshift = 0 if walls else 1  # right bead of contact j
-    for j in range(closed.shape[0]):
+    rshift = np.uint64(0) if walls else one  # right bead of contact j
+    for j in range(np.uint64(closed.shape[0])):
         rb = j + rshift
         x_r, vh_r, ve_r = 0.0, 0.0, 0.0
         if rb < n:
@@ -346,15 +375,15 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
         d = x_c - x_r - gap
         r = ve_c - ve_r
         if not flags.locate and quantized_due(closed[j], d, doff):
-            quantized_switch(flags, params, j, d, xo, h, t0, ks)
+            quantized_switch(flags, params, np.int64(j), d, xo, h, t0, ks)
         f_r, fv_r = 0.0, 0.0
         if closed[j]:
             f_r, ok = contact_force(exact, hertz, d, params)
             if not ok:
-                fail(counters, OUT_OF_TABLE, j)
+                fail(counters, OUT_OF_TABLE, np.int64(j))
             fv_r = f_r
             if d < params.mean_force_below:  # near snap-off: mean-force kick
-                d0 = across(walls, xo, j) - gap
+                d0 = across(walls, xo, np.int64(j)) - gap
                 fv_r = (2.0 * schwarz_mean_force(d0, d, params.law)
                         - closed_force(exact, hertz, d0, params))
             if flags.damped:
@@ -370,20 +399,20 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
             # a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
             if g < 0.0 or g < 0.5 * h * gd:
                 if nflag < flagged.shape[0]:
-                    flagged[nflag] = j
+                    flagged[nflag] = np.int64(j)
                 nflag += 1
-        if rb >= 1:  # finish the left bead
+        if rb >= one:  # finish the left bead
             a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, flags, params)
-            new.x[rb - 1] = x_c
-            new.a[rb - 1] = a
-            new.v[rb - 1] = vh_c + hh * av
+            new.x[rb - one] = x_c
+            new.a[rb - one] = a
+            new.v[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls:  # the last bead has no contact on its right
         a, av = bead_accelerations(f_l, fv_l, x_c, flags, params)
-        new.x[n - 1] = x_c
-        new.a[n - 1] = a
-        new.v[n - 1] = vh_c + hh * av
+        new.x[n - one] = x_c
+        new.a[n - one] = a
+        new.v[n - one] = vh_c + hh * av
     counters.flagged = nflag
     return power
 
@@ -661,10 +690,35 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt):
         counters.step += 1
 
 
+@njit(inline="always")
+def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt):
+    """Frames ``first .. first + nframes - 1`` (frame ``i`` ends at step ``i * spf``), each
+    state at a frame's end copied into ``block`` row ``i - first``; returns the frames done
+    (fewer on an error or a half-full event log: ``counters.status``; the steps of the
+    unfinished frame done so far are kept, and a next call continues them)."""
+    counters = ks.counters[0]
+    for k in range(nframes):
+        advance_steps(flags, params, buffers, ks, (first + k) * spf - counters.step, dt)
+        if counters.status != OK:
+            return k
+        c = counters.current
+        block.x[k, :] = buffers.x[c]
+        block.v[k, :] = buffers.v[c]
+        block.a[k, :] = buffers.a[c]
+        block.closed[k, :] = ks.closed
+        block.sums[k, 0] = counters.d_viscous
+        block.sums[k, 1] = counters.d_hysteresis
+        block.sums[k, 2] = counters.power
+        block.counts[k, 0] = counters.events
+        block.counts[k, 1] = counters.substeps
+    return nframes
+
+
 # ---- the entry point ----------------------------------------------------------------------
 # A named tuple crosses from Python into compiled code about 1 us slower than a plain one (numba
-# types it in Python), and the fast backend calls the loop once per frame; so the records cross
-# as plain tuples (`plain`) and are named again on the compiled side (`named_*`).
+# types it in Python), and the fast backend calls the loop once per block of frames (once per
+# frame for long chains); so the records cross as plain tuples (`plain`) and are named again
+# on the compiled side (`named_*`).
 def plain(record):
     """A record (named tuples, nested) as plain tuples, for :func:`get_kernel`'s loop."""
     if isinstance(record, tuple):
@@ -690,9 +744,11 @@ _KERNELS: dict = {}
 
 def get_kernel(flags: Flags):
     """The compiled stepping loop of one variant (compiled on first use, then cached on disk by
-    numba), ``advance(plain(params), plain(buffers), plain(ks), nsteps, dt)``: up to ``nsteps``
-    steps of ``dt`` from ``buffers`` (:class:`Beads` of ``[2, n]`` arrays) at
-    ``counters.current``; stops early on an error or when the event log is half full
+    numba), ``advance(plain(params), plain(buffers), plain(ks), plain(block), first, nframes,
+    spf, dt) -> frames done``: from ``buffers`` (:class:`Beads` of ``[2, n]`` arrays) at
+    ``counters.current``, steps of ``dt`` to the ends of frames ``first .. first + nframes -
+    1`` (frame ``i`` ends at step ``i * spf``), each frame's state into ``block``
+    (:func:`advance_frames`); stops early on an error or when the event log is half full
     (``counters.status``)."""
     flags = Flags(*(bool(f) for f in flags))
     if flags not in _KERNELS:
@@ -702,7 +758,8 @@ def get_kernel(flags: Flags):
 
 def _make_advance(flags):
     @njit(cache=True)
-    def advance(params, buffers, ks, nsteps, dt):
-        advance_steps(flags, named_params(params), Beads(*buffers), named_state(ks), nsteps, dt)
+    def advance(params, buffers, ks, block, first, nframes, spf, dt):
+        return advance_frames(flags, named_params(params), Beads(*buffers), named_state(ks),
+                              FrameBlock(*block), first, nframes, spf, dt)
 
     return advance
