@@ -51,3 +51,46 @@ class InterruptAt:
 @pytest.fixture
 def interrupt_at():
     return InterruptAt
+
+
+@pytest.fixture(scope="session")
+def plugin():
+    """The native LAMMPS contact plugin (the install builds it; CI has g++)."""
+    from mdgran import native_plugin
+
+    try:
+        return native_plugin.plugin_path()
+    except native_plugin.PluginUnavailable as exc:  # pragma: no cover - CI has g++
+        pytest.fail(f"the plugin is missing where the install should have built it: {exc}")
+
+
+def spread_chain_input(plugin, fixes: str, thermo: str) -> str:
+    """A plain LAMMPS input with the plugin: 200 beads at unit spacing between two walls, ghost
+    cut-off 6 (contacts straddle the boundary of 2 ranks), bead 100 struck at 12; ``fixes``:
+    the contact fix and whatever integrates; ``thermo``: the columns after ``step``.  Run with
+    ``-var tag NAME``: writes ``final.NAME`` (id, x, vx) after 1200 steps."""
+    return f"""
+plugin load {plugin}
+units lj
+atom_style atomic
+atom_modify map array sort 0 0.0
+boundary m f f
+comm_modify vel yes cutoff 6.0
+lattice sc 1.0
+region box block -0.5 201.5 -0.5 0.5 -0.5 0.5 units lattice
+create_box 1 box
+create_atoms 1 box
+mass 1 1.0
+pair_style none
+group wall id 1 202
+group mobile subtract all wall
+group struck id 100
+{fixes}
+velocity struck set 12.0 0.0 0.0 units box
+timestep 0.0025
+thermo_style custom step {thermo}
+thermo_modify norm no format float %.17g
+thermo 1200
+run 1200
+write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
+"""

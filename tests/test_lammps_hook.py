@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran import native_plugin
 from mdgran.backends import lammps_hook as kernel
 from mdgran.contact import ContactLaw, ContactTable, fc_from_lambda
 from mdgran.scene import load_scene
@@ -26,14 +25,6 @@ sys.path.insert(0, str(HERE))
 import lammps_ranks_worker as worker  # noqa: E402
 
 MPIEXEC = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
-
-
-@pytest.fixture(scope="module")
-def plugin():
-    try:
-        return native_plugin.plugin_path()
-    except native_plugin.PluginUnavailable as exc:  # pragma: no cover - CI has g++
-        pytest.fail(f"the plugin is missing where the install should have built it: {exc}")
 
 
 class _Model:  # what lammps_hook.parameters reads of a chain model

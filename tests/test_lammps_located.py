@@ -14,19 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran import native_plugin
+from conftest import spread_chain_input
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import make_backend, run
 
 pytestmark = pytest.mark.lammps
-
-
-@pytest.fixture(scope="module")
-def plugin():
-    try:
-        return native_plugin.plugin_path()
-    except native_plugin.PluginUnavailable as exc:  # pragma: no cover - CI has g++
-        pytest.fail(f"the plugin is missing where the install should have built it: {exc}")
 
 
 def located(scene, dt=None, **options):
@@ -119,34 +111,15 @@ def test_macro_hertz_against_reference(plugin):
     assert 3.5 < ea / eb < 4.5 and ea < 2e-4  # measured 1.07e-4, ratio 3.99
 
 
-SPREAD = """
-plugin load {plugin}
-units lj
-atom_style atomic
-atom_modify map array sort 0 0.0
-boundary m f f
-comm_modify vel yes cutoff 6.0
-lattice sc 1.0
-region box block -0.5 201.5 -0.5 0.5 -0.5 0.5 units lattice
-create_box 1 box
-create_atoms 1 box
-mass 1 1.0
-pair_style none
-group wall id 1 202
-group mobile subtract all wall
-group struck id 100
-fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 k3 0.002 &
+SPREAD_FIXES = """fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 k3 0.002 &
     walls yes events located
 fix_modify contact energy yes
-fix line all setforce NULL 0.0 0.0
-velocity struck set 12.0 0.0 0.0 units box
-timestep 0.0025
-thermo_style custom step ke pe f_contact[1] f_contact[2] f_contact[3]
-thermo_modify norm no format float %.17g
-thermo 1200
-run 1200
-write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
-"""
+fix line all setforce NULL 0.0 0.0"""
+
+
+def spread(plugin):
+    """conftest's 200-bead input with the located contact."""
+    return spread_chain_input(plugin, SPREAD_FIXES, "ke pe f_contact[1] f_contact[2] f_contact[3]")
 
 
 def test_one_and_two_ranks_agree(plugin, tmp_path):
@@ -154,7 +127,7 @@ def test_one_and_two_ranks_agree(plugin, tmp_path):
     struck: snap-offs split the step on both ranks at the global earliest event; the same
     positions, velocities, events and energies as on 1 rank (round-off)."""
     script = tmp_path / "spread.in"
-    script.write_text(SPREAD.format(plugin=plugin))
+    script.write_text(spread(plugin))
     lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
     thermo = {}
@@ -179,7 +152,7 @@ def test_located_refuses_a_second_integrator(plugin, tmp_path):
     """With events located the fix moves the atoms: a fix nve (or spring/self) beside it is
     refused in one line naming the fix to remove."""
     script = tmp_path / "twice.in"
-    script.write_text(SPREAD.format(plugin=plugin).replace(
+    script.write_text(spread(plugin).replace(
         "fix line all", "fix move mobile nve\nfix line all"))
     lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
     out = subprocess.run([lmp, "-var", "tag", "x", "-in", str(script)], cwd=tmp_path,
@@ -191,7 +164,7 @@ def test_located_refuses_a_second_integrator(plugin, tmp_path):
 def test_restart_and_split_runs_continue_bitwise(plugin, tmp_path):
     """A located run continued from a restart file, and one run in two pieces, are the
     uninterrupted run bit for bit (the stored accelerations and damping power carry over)."""
-    small = SPREAD.format(plugin=plugin).replace("201.5", "41.5").replace(
+    small = spread(plugin).replace("201.5", "41.5").replace(
         "id 1 202", "id 1 42").replace("id 100", "id 2")  # 40 beads, bead 1 struck
     head, setup = small.split("pair_style none\n")
     head += "pair_style none\n"

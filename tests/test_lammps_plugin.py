@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import spread_chain_input
 from mdgran import native_plugin
 from mdgran.scene import load_scene
 from mdgran.simulation import run
@@ -19,14 +20,6 @@ pytestmark = pytest.mark.lammps
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "lammps_inputs" / "examples" / "micro_star_native.in"
-
-
-@pytest.fixture(scope="module")
-def plugin():
-    try:
-        return native_plugin.plugin_path()
-    except native_plugin.PluginUnavailable as exc:  # pragma: no cover - CI has g++
-        pytest.fail(f"the plugin is missing where the install should have built it: {exc}")
 
 
 def same_run(a, b, atol=1e-12):
@@ -91,35 +84,13 @@ def test_two_ranks_with_a_short_ghost_cutoff(plugin, tmp_path):
     atoms, contacts straddle the rank boundary (bead 100 is struck); same result as 1 rank.
     (Short: two MPI ranks crawl when the machine's cores are oversubscribed.)"""
     script = tmp_path / "spread.in"
-    script.write_text(f"""
-plugin load {plugin}
-units lj
-atom_style atomic
-atom_modify map array sort 0 0.0
-boundary m f f
-comm_modify vel yes cutoff 6.0
-lattice sc 1.0
-region box block -0.5 201.5 -0.5 0.5 -0.5 0.5 units lattice
-create_box 1 box
-create_atoms 1 box
-mass 1 1.0
-pair_style none
-group wall id 1 202
-group mobile subtract all wall
-group struck id 100
-fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 k3 0.002 walls yes
+    script.write_text(spread_chain_input(plugin, """fix contact all mdgran/chain law schwarz \
+lambda 0.64 damping 0.013 k1 0.012 k3 0.002 walls yes
 fix_modify contact energy yes
 fix substrate mobile spring/self 0.012 x
 fix move mobile nve
-fix line all setforce NULL 0.0 0.0
-velocity struck set 12.0 0.0 0.0 units box
-timestep 0.0025
-thermo_style custom step pe f_contact[1] f_contact[2] f_contact[3]
-thermo_modify norm no format float %.17g
-thermo 1200
-run 1200
-write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
-""")
+fix line all setforce NULL 0.0 0.0""", "pe f_contact[1] f_contact[2] f_contact[3]"))
+
     lmp = str(Path(sys.executable).with_name("lmp.exe" if sys.platform == "win32" else "lmp"))
     lmp = shutil.which("lmp") or lmp
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
