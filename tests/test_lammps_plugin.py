@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import spread_chain_input
+from conftest import run_on_one_and_two_ranks, spread_chain_input
 from mdgran import native_plugin
 from mdgran.scene import load_scene
 from mdgran.simulation import run
@@ -91,22 +91,9 @@ fix substrate mobile spring/self 0.012 x
 fix move mobile nve
 fix line all setforce NULL 0.0 0.0""", "pe f_contact[1] f_contact[2] f_contact[3]"))
 
-    lmp = str(Path(sys.executable).with_name("lmp.exe" if sys.platform == "win32" else "lmp"))
-    lmp = shutil.which("lmp") or lmp
-    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
-    runs = {"one": [lmp], "two": [mpiexec, "-n", "2", lmp]}
-    thermo = {}
-    for tag, cmd in runs.items():
-        out = subprocess.run([*cmd, "-var", "tag", tag, "-in", str(script)], cwd=tmp_path,
-                             capture_output=True, text=True, timeout=120)
-        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
-        rows = [ln.split() for ln in out.stdout.splitlines() if ln.strip().startswith("1200 ")]
-        thermo[tag] = [float(v) for v in rows[-1][1:]]
-        if tag == "two":
-            nghost = float(out.stdout.split("Nghost:")[1].split()[0])
-            assert 0 < nghost < 10  # the chain is really split: a few ghosts per rank
-    a = np.loadtxt(tmp_path / "final.one", skiprows=9)
-    b = np.loadtxt(tmp_path / "final.two", skiprows=9)
+    thermo, final, nghost = run_on_one_and_two_ranks(script, tmp_path)
+    assert 0 < nghost < 10  # the chain is really split: a few ghosts per rank
+    a, b = final["one"], final["two"]
     assert np.abs(a - b).max() <= 1e-12
     assert thermo["two"][3] == thermo["one"][3] > 0  # same number of events
     np.testing.assert_allclose(thermo["two"], thermo["one"], rtol=1e-12)
