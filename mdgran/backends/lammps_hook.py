@@ -205,27 +205,11 @@ def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev):
     return nev + 1
 
 
-@njit(cache=True)
-def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
-                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, events):
-    """Forces of the contacts on this rank's atoms into ``fext`` (x column; y, z zeroed) and,
-    at a new step, state switches, ``aprev`` of owned atoms and this rank's events.
-
-    ``tmap`` must hold the current atoms (:func:`build_map`); ``u, w, fcon`` (``>= nall``),
-    ``left`` (``>= nlocal``), ``pairs`` (``>= nall`` rows of 2) are scratch; ``events``
-    (``>= nlocal`` rows) receives ``[local index of the left atom, kind (1 close, 0 open), time,
-    energy lost]``.  Returns ``(number of events, damping power c sum rate^2 over this rank's
-    contacts, error code, its local index, its value)``.
-
-    The contacts are listed first, then evaluated in one loop that calls only small functions
-    (the compiler inlines them) or, for an event, :func:`_record`: a call the compiler does not
-    inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns per
-    contact, three times the contact's own work."""
-    walls = ipar[I_WALLS]
-    ntags = ipar[I_NTAGS]
-    dt = par[P_DT]
-    use_est = step > 0 and have_last
-    # 0. displacement and velocity estimate v(t + dt/2) + dt/2 a(t) of owned and ghost atoms
+@njit(inline="always")
+def _displacements(tag, x, v, x0, aprev, nall, par, ipar, use_est, u, w):
+    """Displacement ``u = x - x0`` and velocity estimate ``w = v(t + dt/2) + dt/2 a(t)`` of
+    every owned and ghost atom (walls: 0)."""
+    walls, ntags, dt = ipar[I_WALLS], ipar[I_NTAGS], par[P_DT]
     for i in range(nall):
         t = tag[i]
         if walls and (t == 1 or t == ntags):
@@ -234,9 +218,16 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
         else:
             u[i] = x[i, 0] - x0[i]
             w[i] = v[i, 0] + 0.5 * dt * aprev[i] if use_est else v[i, 0]
-    # 1. the contacts: first those whose left atom is owned (own = the events and the damping
-    # power are this rank's), noting the left neighbour of each owned right atom; then those
-    # whose left atom is a ghost and right atom owned (updated on the ghost's copy)
+
+
+@njit(inline="always")
+def _list_contacts(tag, nlocal, nall, closed, tmap, ntags, left, fcon, pairs):
+    """The contacts this rank evaluates, as ``(left, right)`` local indices in ``pairs``: first
+    those whose left atom is owned (their events and damping power are this rank's), noting
+    the left neighbour of each owned right atom in ``left``; then those whose left atom is a
+    ghost and right atom owned (updated on the ghost's copy of the state).  Returns ``(count,
+    owned count, i)``: ``i >= 0`` is an owned atom whose closed contact's partner is beyond
+    the ghost cut-off (an error)."""
     nmap = tmap.shape[0]
     for i in range(nlocal):
         left[i] = -1
@@ -249,7 +240,7 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
         j = tmap[t] if t < nmap else -1
         if j < 0 or j >= nall or tag[j] != t:  # beyond the ghost cut-off: only if open
             if closed[i] != 0:
-                return 0, 0.0, PARTNER_MISSING, i, 0.0
+                return npair, npair, i
             continue
         if j < nlocal:
             left[j] = i
@@ -270,11 +261,21 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
             pairs[npair, 0] = l
             pairs[npair, 1] = i
             npair += 1
-    # 2. each contact: state update at a new step, then its force into fcon[left atom]
+    return npair, nown, -1
+
+
+@njit(inline="always")
+def _contact_forces(pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, step, new_step,
+                    have_last, fcon, events):
+    """Each listed contact: at a new step its state update (step-quantized: a closed contact
+    at or past ``delta_off`` opens, an open one at or past 0 closes; strict inequalities where
+    ``delta_off = 0``), then its force ``f(delta) + c d(delta)/dt`` (closed) or 0 into
+    ``fcon[left atom]``.  Returns ``(events, sum rate^2 of owned closed contacts, error code,
+    its local index, its value)``."""
     gap, damping, delta_off = par[P_GAP], par[P_DAMPING], par[P_DELTA_OFF]
     strict, table = ipar[I_STRICT], ipar[I_TABLE]
     nev = 0
-    power = 0.0
+    rate2 = 0.0
     for k in range(npair):
         l = pairs[k, 0]
         r = pairs[k, 1]
@@ -299,7 +300,7 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
             if own:
                 dprev[l] = delta
         if table and delta > par[P_DELTA_MAX]:
-            return nev, power, BEYOND_TABLE, l, delta
+            return nev, rate2, BEYOND_TABLE, l, delta
         F = 0.0
         if closed[l] != 0:
             if not math.isfinite(delta):
@@ -311,9 +312,17 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
             if damping != 0.0:
                 F = F + damping * rate
                 if own and new_step:
-                    power += rate * rate
+                    rate2 += rate * rate
         fcon[l] = F
-    # 3. forces on owned atoms: x'' = F_left - F_right - k3 u^3 (- k1 u: fix spring/self)
+    return nev, rate2, OK, -1, 0.0
+
+
+@njit(inline="always")
+def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
+    """Forces on owned atoms, ``x'' = F_left - F_right - k3 u^3`` (``- k1 u`` is fix
+    spring/self's) into ``fext`` (y, z zeroed), and at a new step ``aprev`` (with ``- k1 u``).
+    Returns ``(error code, local index, value)`` (a non-finite force)."""
+    walls, ntags = ipar[I_WALLS], ipar[I_NTAGS]
     k1, k3 = par[P_K1], par[P_K3]
     for i in range(nlocal):
         ext = 0.0
@@ -324,16 +333,46 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
             if k3 != 0.0:
                 ext = ext - k3 * math.pow(u[i], 3.0)
         if not math.isfinite(ext):
-            return nev, power, NON_FINITE, i, ext
+            return NON_FINITE, i, ext
         fext[i, 0] = ext
         fext[i, 1] = 0.0
         fext[i, 2] = 0.0
         if new_step:
             aprev[i] = ext - k1 * u[i] if k1 != 0.0 else ext
-    if damping != 0.0:
-        power = damping * power
-    else:
-        power = 0.0
+    return OK, -1, 0.0
+
+
+@njit(cache=True)
+def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
+                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, events):
+    """Forces of the contacts on this rank's atoms into ``fext`` (x column; y, z zeroed) and,
+    at a new step, state switches, ``aprev`` of owned atoms and this rank's events.
+
+    ``tmap`` must hold the current atoms (:func:`build_map`); ``u, w, fcon`` (``>= nall``),
+    ``left`` (``>= nlocal``), ``pairs`` (``>= nall`` rows of 2) are scratch; ``events``
+    (``>= nlocal`` rows) receives ``[local index of the left atom, kind (1 close, 0 open), time,
+    energy lost]``.  Returns ``(number of events, damping power c sum rate^2 over this rank's
+    contacts, error code, its local index, its value)``.
+
+    Four passes, each a function the compiler inlines (``inline="always"``): a call it does not
+    inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns per
+    contact, three times the contact's own work; only an event calls out (:func:`_record`)."""
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, u, w)
+    npair, nown, missing = _list_contacts(tag, nlocal, nall, closed, tmap, ipar[I_NTAGS], left,
+                                          fcon, pairs)
+    if missing >= 0:
+        return 0, 0.0, PARTNER_MISSING, missing, 0.0
+    nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed, dprev,
+                                                     coef, par, ipar, step, new_step,
+                                                     have_last, fcon, events)
+    if code != OK:
+        return nev, rate2, code, where, value
+    code, where, value = _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext,
+                                      aprev)
+    damping = par[P_DAMPING]
+    power = damping * rate2 if damping != 0.0 else 0.0
+    if code != OK:
+        return nev, rate2, code, where, value
     return nev, power, OK, -1, 0.0
 
 
