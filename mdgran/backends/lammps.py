@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import native_plugin
+from ..chain import first_contact
 from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
@@ -324,8 +325,9 @@ class LammpsBackend(Backend):
                 self._mpi = lmp.get_mpi_comm()
             except Exception as exc:  # noqa: BLE001 - ImportError, or a LAMMPS without MPI
                 raise IntegrationError(
-                    f"the Python contact hook on {self.nprocs} MPI ranks needs mpi4py (pip "
-                    f"install 'mdgran[mpi]'), or use contact='native' ({exc})") from None
+                    f"the Python contact hook on {self.nprocs} MPI ranks needs mpi4py, a "
+                    f"dependency of mdgran (pip install mpi4py), or use contact='native' "
+                    f"({exc})") from None
         self._views = _AtomViews(lmp)
         # the raw callback: lammps.set_fix_external_callback would wrap tag, x and f into new
         # numpy arrays at every call (measured with the 7 arrays of _AtomViews also wrapped at
@@ -439,7 +441,9 @@ class LammpsBackend(Backend):
         self.stats["steps"] = int(step)
 
     def _contact_number(self, left_tag):
-        return left_tag if self.walls else left_tag + 1
+        """Contract number of the contact whose left atom has tag ``left_tag`` (tag ``k`` is
+        the ``k``-th atom along the line, walls included)."""
+        return first_contact(self.walls) + left_tag - 1
 
     def _kernel_error(self, err, tag, value, step):
         kernel, t = self._kernel, step * self.dt
