@@ -90,7 +90,10 @@ def test_sigint_stops_a_lammps_run_and_never_marks_it_complete(tmp_path):
 @pytest.mark.parametrize("backend", ["reference", "fast"])
 def test_sigterm_leaves_a_checkpoint_that_resumes_bitwise(tmp_path, backend):
     """Case 4: SIGTERM (a scheduler's time limit) left an invalid 96-byte temporary."""
-    args = ["run", "micro-star", "--set", "run.duration=30", "--set",
+    # long enough to be running when the first checkpoint is written: the fast backend runs
+    # micro-star's 3000 frames to t = 30 in ~0.1 s since it computes frames in blocks
+    duration = {"reference": 30, "fast": 300}[backend]
+    args = ["run", "micro-star", "--set", f"run.duration={duration}", "--set",
             "run.output_interval=0.01", "--backend", backend, "--quiet"]
     out = tmp_path / "t.h5"
     proc = _start([*args, "--out", str(out), "--checkpoint", "0.2"])
