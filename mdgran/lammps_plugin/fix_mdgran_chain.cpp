@@ -94,7 +94,7 @@ static constexpr double GL_W[5] = {0.2369268850561891, 0.4786286704993665, 0.568
 FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     Fix(lmp, narg, arg), x0(nullptr), closed(nullptr), dprev(nullptr), aprev(nullptr),
     xs(nullptr), vs(nullptr), fcon(nullptr), u(nullptr), w(nullptr), left(nullptr),
-    fkick(nullptr), anew(nullptr), akick(nullptr), nmax_scratch(0)
+    fkick(nullptr), anew(nullptr), akick(nullptr), nmax_scratch(0), contacts_stale(1)
 {
   hertz = 0;
   fc = 0.0;
@@ -225,7 +225,7 @@ FixMdgranChain::~FixMdgranChain()
 
 int FixMdgranChain::setmask()
 {
-  return located ? (INITIAL_INTEGRATE | POST_FORCE) : POST_FORCE;
+  return PRE_NEIGHBOR | (located ? (INITIAL_INTEGRATE | POST_FORCE) : POST_FORCE);
 }
 
 void FixMdgranChain::init()
@@ -333,8 +333,22 @@ inline double FixMdgranChain::disp(int i) const
   return is_wall(atom->tag[i]) ? 0.0 : atom->x[i][0] - x0[i];
 }
 
+// The contact list holds local indices: it is rebuilt after LAMMPS re-neighbours (atoms
+// migrate and the ghosts are made anew, so local indices change), at the set-up of a run, and
+// never in between (it cost ~17% of a step when rebuilt every step).
+void FixMdgranChain::setup_pre_neighbor()
+{
+  contacts_stale = 1;
+}
+
+void FixMdgranChain::pre_neighbor()
+{
+  contacts_stale = 1;
+}
+
 void FixMdgranChain::setup(int vflag)
 {
+  contacts_stale = 1;
   if (located) located_setup();
   else post_force(vflag);
   sync();
@@ -360,9 +374,6 @@ void FixMdgranChain::compute(bigint step)
   const double t = (double) step * dt;
   const int use_est = step > 0 && have_last;
   const int nprocs = comm->nprocs;
-  // tag -> local index: the map array directly where there is one (atom->map() is virtual)
-  const int *mapa = atom->map_style == Atom::MAP_ARRAY ? atom->get_map_array() : nullptr;
-  auto find = [&](tagint k) { return mapa ? mapa[k] : atom->map(k); };
   double power = 0.0;
   std::vector<Event> found;    // events of this step with their lost energy
   std::vector<double> lost;
@@ -417,31 +428,14 @@ void FixMdgranChain::compute(bigint step)
     fcon[l] = F;
   };
 
-  // 1. contacts owned here (left atom owned); note each owned right atom's left neighbour
-  for (int i = 0; i < nlocal; i++) left[i] = -1;
-  for (int i = 0; i < nlocal; i++) {
-    fcon[i] = 0.0;
-    if (tag[i] >= natoms) continue;    // last atom: no contact to its right
-    int j = find(tag[i] + 1);
-    if (j < 0) {    // partner beyond the ghost cut-off: fine only for an open contact
-      if (closed[i] != 0.0)
-        error->one(FLERR, "fix mdgran/chain: contact {} is closed but atom {} is beyond the "
-                   "ghost cut-off (raise comm_modify cutoff)", contact_number(tag[i]), tag[i] + 1);
-      continue;
-    }
-    if (j < nlocal) left[j] = i;
-    contact(i, j, 1);
-  }
-  // 2. contacts whose left atom is a ghost and right atom owned: the same update on the copy
-  for (int i = 0; i < nlocal; i++) {
-    if (left[i] >= 0 || tag[i] <= 1) continue;
-    int l = find(tag[i] - 1);
-    left[i] = l;    // -1: beyond the cut-off, so open (its owner checks)
-    if (l >= nlocal) contact(l, i, 0);
-  }
+  // 1. the contacts this rank evaluates (build_contacts): owned left atom (own), or a ghost
+  // left atom and an owned right one (the same update on the copy)
+  if (contacts_stale) build_contacts();
+  for (const Con &c : cons) contact(c.l, c.r, c.own);
   // 3. forces on owned atoms: x'' = F_left - F_right - k3 u^3 (- k1 u by fix spring/self)
   double **f = atom->f;
   int *mask = atom->mask;
+  double check = 0.0;
   for (int i = 0; i < nlocal; i++) {
     double ext = 0.0;
     if (!is_wall(tag[i])) {
@@ -449,10 +443,18 @@ void FixMdgranChain::compute(bigint step)
       ext = (0.0 - fcon[i]) + fl;
       if (k3 != 0.0) ext = ext - k3 * std::pow(u[i], 3.0);
     }
-    if (!std::isfinite(ext))
-      error->one(FLERR, "non-finite force at t = {:.12g}, bead {}", t, walls ? tag[i] - 1 : tag[i]);
+    check += ext * 0.0;    // 0, unless some ext is not finite (NaN then)
     if (mask[i] & groupbit) f[i][0] += ext;
     if (new_step) aprev[i] = k1 != 0.0 ? ext - k1 * u[i] : ext;
+  }
+  if (check != 0.0) {    // rare: find the first bead with a non-finite force
+    for (int i = 0; i < nlocal; i++) {
+      double fl = left[i] >= 0 ? fcon[left[i]] : 0.0;
+      if (!is_wall(tag[i]) && !std::isfinite(fl - fcon[i] - (k3 != 0.0 ? k3 * u[i] : 0.0)))
+        error->one(FLERR, "non-finite force at t = {:.12g}, bead {}", t,
+                   walls ? tag[i] - 1 : tag[i]);
+    }
+    error->one(FLERR, "non-finite force at t = {:.12g}", t);
   }
 
   if (!new_step) return;
@@ -551,6 +553,7 @@ inline int FixMdgranChain::moves(int i) const
 void FixMdgranChain::ensure_scratch()
 {
   nmax_scratch = atom->nmax;
+  contacts_stale = 1;    // left[] and the zeroed forces are gone
   memory->destroy(fcon);
   memory->destroy(u);
   memory->destroy(w);
@@ -598,10 +601,14 @@ void FixMdgranChain::ensure_scratch()
 void FixMdgranChain::build_contacts()
 {
   const int nlocal = atom->nlocal;
-  if (nlocal + atom->nghost > nmax_scratch) ensure_scratch();
+  const int nall = nlocal + atom->nghost;
+  if (nall > nmax_scratch) ensure_scratch();
   tagint *tag = atom->tag;
   const tagint natoms = ntags = (tagint) atom->natoms;
+  contacts_stale = 0;
   cons.clear();
+  // forces of atoms without a contact on their right stay 0; the others are set every pass
+  for (int i = 0; i < nall; i++) fcon[i] = fkick[i] = 0.0;
   for (int i = 0; i < nlocal; i++) left[i] = -1;
   for (int i = 0; i < nlocal; i++) {
     if (tag[i] >= natoms) continue;
@@ -621,13 +628,6 @@ void FixMdgranChain::build_contacts()
     left[i] = l;
     if (l >= nlocal) cons.push_back({l, i, 0});
   }
-}
-
-// f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free of
-// its round-off force at delta = 0, which would make resting contacts flicker), else as set up
-double FixMdgranChain::located_force(double d) const
-{
-  return (hertz || !use_table) ? exact_force(d) : spline_force(d);
 }
 
 // Mean force over the compression interval, (V(d1) - V(d0)) / (d1 - d0) (Schwarz): in the
@@ -655,11 +655,16 @@ double FixMdgranChain::mean_force(double d0, double d1) const
 
 // Drift of the owned moving atoms from the substep start (xs, vs, aprev) over h:
 //   v = vs + h/2 a0 (= v_half),  x = xs + h v.   Ghosts follow by forward communication.
-void FixMdgranChain::drift(double h)
+// start: a new substep starts here, from the current x and v of every owned atom (xs, vs).
+void FixMdgranChain::drift(double h, int start)
 {
   double **x = atom->x, **v = atom->v;
   const double hh = 0.5 * h;
   for (int i = 0; i < atom->nlocal; i++) {
+    if (start) {
+      xs[i] = x[i][0];
+      vs[i] = v[i][0];
+    }
     if (!moves(i)) continue;
     double vh = vs[i] + hh * aprev[i];
     x[i][0] = xs[i] + h * vh;
@@ -668,24 +673,17 @@ void FixMdgranChain::drift(double h)
 }
 
 // Kick of the owned moving atoms at the end of a pass of length h: v = v_half + h/2 a_kick;
-// the end acceleration becomes the next substep's a0.
-void FixMdgranChain::kick(double h)
+// the end acceleration becomes the next substep's a0.  last: the step ends here, and LAMMPS's
+// force array gets the acceleration (mass 1) for its computes and dumps.
+void FixMdgranChain::kick(double h, int last)
 {
-  double **v = atom->v;
+  double **v = atom->v, **f = atom->f;
   const double hh = 0.5 * h;
   for (int i = 0; i < atom->nlocal; i++) {
-    if (moves(i)) v[i][0] = v[i][0] + hh * akick[i];
     aprev[i] = anew[i];
-  }
-}
-
-// a new substep starts from the current state of the owned atoms
-void FixMdgranChain::start_substep()
-{
-  double **x = atom->x, **v = atom->v;
-  for (int i = 0; i < atom->nlocal; i++) {
-    xs[i] = x[i][0];
-    vs[i] = v[i][0];
+    if (!moves(i)) continue;
+    v[i][0] = v[i][0] + hh * akick[i];
+    if (last) f[i][0] += aprev[i];
   }
 }
 
@@ -708,7 +706,6 @@ double FixMdgranChain::located_pass(double h)
       w[i] = h > 0.0 ? v[i][0] + hh * aprev[i] : v[i][0];    // v_est = v_half + h/2 a0
     }
   }
-  for (int i = 0; i < nlocal; i++) fcon[i] = fkick[i] = 0.0;
   double power = 0.0;
   flagged.clear();
   for (int k = 0; k < (int) cons.size(); k++) {
@@ -743,6 +740,7 @@ double FixMdgranChain::located_pass(double h)
     fcon[c.l] = F;
     fkick[c.l] = Fv;
   }
+  double check = 0.0;
   for (int i = 0; i < nlocal; i++) {
     double a = 0.0, av = 0.0;
     if (!is_wall(tag[i])) {
@@ -754,11 +752,15 @@ double FixMdgranChain::located_pass(double h)
       a -= sub;
       av -= sub;
     }
-    if (!std::isfinite(a) || !std::isfinite(av))
-      error->one(FLERR, "non-finite force at t = {:.12g}, bead {}",
-                 update->ntimestep * update->dt, walls ? tag[i] - 1 : tag[i]);
     anew[i] = a;
     akick[i] = av;
+    check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
+  }
+  if (check != 0.0) {    // rare: find the first bead with a non-finite force
+    for (int i = 0; i < nlocal; i++)
+      if (!std::isfinite(anew[i]) || !std::isfinite(akick[i]))
+        error->one(FLERR, "non-finite force at t = {:.12g}, bead {}",
+                   update->ntimestep * update->dt, walls ? tag[i] - 1 : tag[i]);
   }
   return power;
 }
@@ -893,17 +895,9 @@ void FixMdgranChain::settle(std::vector<int> &list, double time)
 }
 
 // LAMMPS's force array gets the acceleration (mass 1) of the current state (thermo, dumps)
-void FixMdgranChain::add_force_to_lammps()
-{
-  double **f = atom->f;
-  for (int i = 0; i < atom->nlocal; i++)
-    if (moves(i)) f[i][0] += aprev[i];
-}
-
 void FixMdgranChain::initial_integrate(int /*vflag*/)
 {
-  start_substep();
-  drift(update->dt);
+  drift(update->dt, 1);
 }
 
 // Set-up of a run: at the first one, settle every contact and compute a(0) and P(0) with the
@@ -920,11 +914,13 @@ void FixMdgranChain::located_setup()
     settle(all, (double) step * update->dt);
     comm->forward_comm(this);
     power_prev = located_pass(0.0);
-    kick(0.0);
+    kick(0.0, 0);
     last_step = step;
     have_last = 1;
   }
-  add_force_to_lammps();
+  double **f = atom->f;    // LAMMPS's force array gets the acceleration (mass 1)
+  for (int i = 0; i < atom->nlocal; i++)
+    if (moves(i)) f[i][0] += aprev[i];
 }
 
 // One step (post_force; initial_integrate has drifted the owned atoms over dt and LAMMPS has
@@ -935,7 +931,7 @@ void FixMdgranChain::located_step()
   const double dt = update->dt;
   const double t0 = (double) (step - 1) * dt;
   const double tol = SIMULTANEOUS * (1.0 + std::fabs(t0));
-  build_contacts();
+  if (contacts_stale) build_contacts();
   double done = 0.0, h = dt;
   for (int nsub = 0;; nsub++) {
     comm->forward_comm(this);    // ghosts: x0, state, substep start (xs, vs, aprev)
@@ -944,11 +940,11 @@ void FixMdgranChain::located_step()
     const int last = te < 0.0 || te >= h - tol;    // the pass reaches the end of the step
     if (!last) {    // redo the substep up to the event
       h = te;
-      drift(h);
+      drift(h, 0);
       comm->forward_comm();
       p1 = located_pass(h);
     }
-    kick(h);
+    kick(h, te < 0.0);
     add_visc(0.5 * h * (power_prev + p1));
     power_prev = p1;
     if (te < 0.0) break;
@@ -960,17 +956,15 @@ void FixMdgranChain::located_step()
     settle(list, tev);
     comm->forward_comm(this);
     power_prev = located_pass(0.0);
-    kick(0.0);
+    kick(0.0, last);
     if (last) break;
     if (nsub >= MAX_SUBSTEPS)
       error->one(FLERR, "more than {} events in one step at t = {:.12g}", MAX_SUBSTEPS, tev);
     done += h;
     h = dt - done;
-    start_substep();
-    drift(h);
+    drift(h, 1);
     comm->forward_comm();
   }
-  add_force_to_lammps();
   last_step = step;
   have_last = 1;
 }

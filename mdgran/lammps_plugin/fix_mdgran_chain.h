@@ -17,6 +17,8 @@ class FixMdgranChain : public Fix {
   ~FixMdgranChain() override;
   int setmask() override;
   void init() override;
+  void setup_pre_neighbor() override;
+  void pre_neighbor() override;
   void setup(int) override;
   void initial_integrate(int) override;
   void post_force(int) override;
@@ -116,18 +118,22 @@ class FixMdgranChain : public Fix {
   std::vector<double> roots;                // their first roots
   std::vector<int> switching;               // indices into cons: switch at the event
   void build_contacts();
-  double located_force(double d) const;
+  int contacts_stale;                       // cons and left[] need rebuilding (re-neighboured)
+  // f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free
+  // of its round-off force at delta = 0, which would make resting contacts flicker), else as set
+  inline double located_force(double d) const
+  {
+    return (hertz || !use_table) ? exact_force(d) : spline_force(d);
+  }
   double located_pass(double h);
-  void drift(double h);
-  void kick(double h);
-  void start_substep();
+  void drift(double h, int start);
+  void kick(double h, int last);
   void located_step();
   void located_setup();
   double first_root(const Con &c, double h) const;
   double earliest_event(double h, double tol);
   void switch_contact(const Con &c, double time);
   void settle(std::vector<int> &list, double time);
-  void add_force_to_lammps();
   void add_visc(double dv);
   void add_event(const Con &c, int kind, double time, double lost);
   inline double ustart(int i) const;         // displacement at the substep start (walls: 0)
