@@ -1,0 +1,238 @@
+"""The compiled floor of the fast kernel (issue 18): a hand-written C loop doing the per-step
+work of :func:`mdgran.backends.fast_kernel.verlet_pass` (``benchmarks/c_floor/floor.c``),
+built with the system C compiler, beside the numba kernel on the same states.
+
+* **Same work.**  The C reads the state the fast backend starts from (after its initial settle
+  and ``init_acc``): constants, the real spline coefficients of
+  :class:`mdgran.contact.ContactTable`, ``x, v, a``, the contact states (:func:`dump_state`).
+  ``check`` runs both for ``CHECK_STEPS`` steps on a 20-bead chain with a gentle impulse in
+  the middle (no event, no flag: the C does not locate events) and reports the largest
+  difference of ``x, v, a`` and ``D_viscous`` (0: the same operations in the same order).
+* **Timing** (``ns per bead-step``): chains of micro-star's law (Schwarz table) and of
+  macro-hertz (``delta^1.5``) at N = 1e4, 1e5, 1e6, from the paper's initial state (every
+  contact closed at ``delta = 0``, impulse on bead 1); each repeat advances about
+  ``BEAD_STEPS`` bead-steps, single thread.  C: one process, ``REPEATS`` repeats each from the
+  previous one's end.  numba: ``FastBackend`` with one frame per repeat (the kernel call's wall
+  time ``stats["kernel_s"]``, and the process CPU time over it, ``cpu``).  The machine may be
+  shared: the CPU times, the load averages before and after, and min and median are recorded.
+* The C is built ``-O2`` (baseline x86-64: SSE2, no FMA), ``-O2 -march=native
+  -ffp-contract=off`` (the instructions numba uses, which compiles for the host CPU without
+  contracting to FMA: the bitwise floor) and ``-O2 -march=native`` (FMA contraction: not
+  bitwise; for reference).
+
+Usage (the numba kernel is the mdgran imported: the working tree, or a worktree of HEAD
+with ``PYTHONPATH``)::
+
+    python benchmarks/kernel_floor.py            # results/kernel_floor.json (~4 min)
+    PYTHONPATH=/work/wt-x python benchmarks/kernel_floor.py --out /tmp/head.json
+    python benchmarks/kernel_floor.py --quick    # smoke run
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SOURCE = HERE / "c_floor" / "floor.c"
+OUT = HERE / "results" / "kernel_floor.json"
+BEAD_STEPS = 2e7  # per timed repeat
+REPEATS = 7
+SIZES = (10_000, 100_000, 1_000_000)
+LAWS = {"table": "micro-star", "hertz": "macro-hertz"}
+CHECK_STEPS = 1000
+DT = 0.0025
+#: build name -> cc flags
+BUILDS = {"O2": ["-O2"], "O2-native-nofma": ["-O2", "-march=native", "-ffp-contract=off"],
+          "O2-native": ["-O2", "-march=native"]}
+
+
+def build(flags: list, folder: Path) -> Path:
+    """The C floor compiled with ``cc`` and ``flags`` into ``folder``."""
+    exe = folder / ("floor" + "".join(flags).replace("=", "_"))
+    subprocess.run(["cc", *flags, "-Wall", "-o", str(exe), str(SOURCE), "-lm"], check=True)
+    return exe
+
+
+def steps_for(n: int, bead_steps: float) -> int:
+    return int(np.clip(bead_steps // n, 10, 400000))
+
+
+def backend(name: str, n: int, steps: int, frames: int, overrides=(), **options):
+    """A FastBackend on scene ``name`` with ``n`` beads, ``steps`` steps per frame and
+    ``frames`` frames after the first, one thread, and its frame generator advanced past
+    frame 0."""
+    from mdgran.backends.fast import FastBackend
+    from mdgran.scene import SceneError, load_scene
+
+    scene = load_scene(name, [("chain.n", n), ("run.dt", DT),
+                              ("run.output_interval", steps * DT),
+                              ("run.duration", frames * steps * DT), *overrides])
+    try:
+        b = FastBackend(scene, **{"threads": 1, **options})
+    except SceneError:  # a backend without the threads option: one thread
+        b = FastBackend(scene, **options)
+    gen = b.frames()
+    next(gen)
+    return b, gen
+
+
+def dump_state(b, path: Path) -> None:
+    """The backend's current state and constants in the C floor's input format: int64
+    ``n, m, walls, damped, k1_on, hertz, rows``; float64 ``h, gap, c, k1, delta_off,
+    delta_max, mean_force_below, base, scale, last, step, power``; the table ``[rows, 4]``;
+    ``x, v, a`` ``[n]``; ``closed`` ``[m]`` uint8."""
+    p, f, t = b.params, b.flags, b.params.table
+    if f.exact or f.k3_on or not f.locate:
+        raise ValueError("the C floor has the table or Hertz law, no k3, located events")
+    now = b._current()
+    coef = np.ascontiguousarray(t.coef, dtype=np.float64)
+    ints = np.array([len(now.x), len(b.closed), f.walls, f.damped, f.k1_on, f.hertz,
+                     coef.shape[0]], dtype=np.int64)
+    dbl = np.array([b.dt, p.gap, p.damping, p.k1, p.delta_off, p.delta_max,
+                    p.mean_force_below, t.base, t.scale, t.last, t.step,
+                    float(b.counters["power"])], dtype=np.float64)
+    with open(path, "wb") as fh:
+        for arr in (ints, dbl, coef, now.x, now.v, now.a, b.closed.astype(np.uint8)):
+            fh.write(np.ascontiguousarray(arr).tobytes())
+
+
+def run_c(exe: Path, state: Path, steps: int, repeats: int, out: Path | None = None) -> dict:
+    args = [str(exe), str(state), str(steps), str(repeats)] + ([str(out)] if out else [])
+    res = subprocess.run(args, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise RuntimeError(f"{exe.name}: {res.stderr.strip()}")
+    return json.loads(res.stdout)
+
+
+def read_c_state(path: Path, n: int):
+    raw = np.fromfile(path, dtype=np.float64)
+    return raw[:n], raw[n:2 * n], raw[2 * n:3 * n], raw[3 * n], raw[3 * n + 1]
+
+
+def check(exe: Path, tmp: Path) -> dict:
+    """C against numba: CHECK_STEPS steps of 20-bead chains with a gentle impulse on bead 10
+    (no events, no flags); the largest differences of the end states."""
+    out = {}
+    for law, name in LAWS.items():
+        b, gen = backend(name, 20, CHECK_STEPS, 1,
+                         [("impulse.bead", 10), ("impulse.velocity", 0.05)])
+        dump_state(b, tmp / "check.bin")
+        c = run_c(exe, tmp / "check.bin", CHECK_STEPS, 1, tmp / "check.out")
+        frame = next(gen)
+        x, v, a, d_visc, power = read_c_state(tmp / "check.out", 20)
+        now = b._current()
+        out[law] = {"steps": CHECK_STEPS, "events": len(frame.events),
+                    "flagged_c": c["flagged"], "kicks_c": c["kicks"],
+                    "max_abs_x": float(np.abs(x - frame.x).max()),
+                    "max_abs_v": float(np.abs(v - frame.v).max()),
+                    "max_abs_a": float(np.abs(a - now.a).max()),
+                    "d_viscous": [float(d_visc), float(frame.dissipated_viscous)],
+                    "bitwise": bool(np.array_equal(x, frame.x) and np.array_equal(v, frame.v)
+                                    and np.array_equal(a, now.a)
+                                    and d_visc == frame.dissipated_viscous),
+                    "max_abs_x_moved": float(np.abs(frame.x).max())}
+        print(f"check {law}: {json.dumps(out[law])}", flush=True)
+    return out
+
+
+def spread(values) -> dict:
+    v = np.asarray(values, dtype=float)
+    return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()),
+            "all": [round(float(x), 4) for x in v]}
+
+
+def time_numba(b, gen, n: int, steps: int, repeats: int) -> dict:
+    """ns per bead-step of ``repeats`` frames of the backend (warm-up frame first)."""
+    next(gen)  # warm-up
+    ns, cpu = [], []
+    for _ in range(repeats):
+        k0, c0 = b.stats["kernel_s"], time.process_time()
+        next(gen)
+        cpu.append((time.process_time() - c0) / (n * steps) * 1e9)
+        ns.append((b.stats["kernel_s"] - k0) / (n * steps) * 1e9)
+    return {"wall": spread(ns), "cpu": spread(cpu), "events": b.stats["events"]}
+
+
+def c_floor(exes: dict, b, n: int, steps: int, repeats: int, tmp: Path) -> dict:
+    """ns per bead-step of each C build from the backend's current state."""
+    dump_state(b, tmp / "state.bin")
+    out = {}
+    for key, exe in exes.items():
+        r = run_c(exe, tmp / "state.bin", steps, repeats)
+        out[key] = {"wall": spread(r["wall_ns"]), "cpu": spread(r["cpu_ns"]),
+                    "flagged": r["flagged"], "kicks": r["kicks"]}
+    (tmp / "state.bin").unlink()
+    return out
+
+
+def measure(exes: dict, sizes, repeats: int, bead_steps: float, tmp: Path) -> dict:
+    out = {}
+    for law, name in LAWS.items():
+        for n in sizes:
+            steps = steps_for(n, bead_steps)
+            load0 = os.getloadavg()
+            b, gen = backend(name, n, steps, repeats + 2)
+            c = c_floor(exes, b, n, steps, repeats, tmp)
+            nb = time_numba(b, gen, n, steps, repeats)
+            row = {"scene": name, "n": n, "steps_per_repeat": steps, "c": c, "numba": nb,
+                   "loads": [load0, os.getloadavg()]}
+            out[f"{law} N={n}"] = row
+            print(f"{law:5s} N={n:>7d}: C " + ", ".join(
+                f"{k} {v['cpu']['min']:.2f}/{v['cpu']['median']:.2f}" for k, v in c.items())
+                + f" ns; numba {nb['cpu']['min']:.2f}/{nb['cpu']['median']:.2f} ns "
+                f"(cpu min/median), load {load0[0]:.2f}", flush=True)
+            del b, gen
+    return out
+
+
+def mdgran_source() -> dict:
+    """Which mdgran the numba kernel came from: its folder, git commit and whether
+    mdgran/backends/fast_kernel.py differs from that commit."""
+    import mdgran
+
+    root = Path(mdgran.__file__).resolve().parent.parent
+
+    def git(*a):
+        return subprocess.run(["git", "-C", str(root), *a], capture_output=True,
+                              text=True).stdout.strip()
+
+    return {"path": str(root), "commit": git("rev-parse", "HEAD"),
+            "fast_kernel_modified": bool(git("status", "--short",
+                                             "mdgran/backends/fast_kernel.py"))}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes, 3 repeats")
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args(argv)
+    sizes, repeats, bead_steps = ((10_000, 100_000), 3, 5e6) if args.quick else \
+        (SIZES, REPEATS, BEAD_STEPS)
+    with tempfile.TemporaryDirectory() as td:
+        tmp = Path(td)
+        exes = {k: build(f, tmp) for k, f in BUILDS.items()}
+        cc = subprocess.run(["cc", "--version"], capture_output=True, text=True).stdout
+        result = {"benchmark": "kernel_floor", "quick": args.quick,
+                  "machine": platform.machine(), "cpus": os.cpu_count(),
+                  "cc": cc.splitlines()[0], "builds": {k: " ".join(v) for k, v in BUILDS.items()},
+                  "python": sys.version.split()[0], "mdgran": mdgran_source(),
+                  "load_at_start": os.getloadavg(),
+                  "check": check(exes["O2"], tmp),
+                  "ns_per_bead_step": measure(exes, sizes, repeats, bead_steps, tmp),
+                  "load_at_end": os.getloadavg()}
+    args.out.parent.mkdir(exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
