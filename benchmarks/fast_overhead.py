@@ -10,9 +10,12 @@ before and after each measurement (the machine is shared: read the timings with 
   ``dt`` = 0.0025 and 0.01.  Times (s): ``kernel`` (the compiled stepping loop only,
   ``stats["kernel_s"]``), ``backend`` (iterating ``FastBackend.frames()`` with nothing done
   per frame: kernel plus the backend's own per-frame work), ``run`` (:func:`mdgran.simulation.run`:
-  backend, ledger, in-memory reporter), ``process`` (a whole ``python -c`` of imports and the
-  run, measured from outside) with ``imports`` and ``setup`` (scene, table, compiled variant
-  loaded) inside it.  Target (issue 18): ``backend <= 1.5 kernel``.
+  backend, ledger, in-memory reporter), the same as CPU times (``backend_cpu``,
+  ``backend_kernel_cpu``: the kernel calls of the ``backend`` measurement, ``run_cpu``; the
+  process's, less sensitive to other processes than wall times), ``process`` (a whole
+  ``python -c`` of imports and the run, measured from outside) with ``imports`` and ``setup`` (scene, table, compiled variant
+  loaded) inside it.  Target (issue 18): ``backend <= 1.5 kernel``
+  (``backend_over_kernel``, and ``backend_over_kernel_cpu`` from the CPU times).
 * ``ns_per_bead_step``: ``chain.n = N`` (1e4, 1e5, 1e6) of micro-star's law and of
   macro-hertz; each repeat advances a fixed number of bead-steps in one kernel call per frame
   (the kernel's wall time only, and the process's CPU time over the same call: ``cpu``, less
@@ -24,6 +27,8 @@ Usage::
     python benchmarks/fast_overhead.py --before /work/wt-before   # results/fast_overhead.json
     python benchmarks/fast_overhead.py --before /work/wt-before --quick   # smoke run (~1 min)
     python benchmarks/fast_overhead.py              # the working tree alone
+    python benchmarks/fast_overhead.py --before /work/wt-before --parts micro_star \
+        --out /tmp/frames.json                     # the frame overhead alone
 """
 from __future__ import annotations
 
@@ -59,13 +64,24 @@ if mode == "process":  # one run as a user's process does it
 run(scene, "fast", dt=dt)  # warm: compiled variants loaded, caches filled
 out = {}
 b = FastBackend(scene, dt=dt)
-w = time.perf_counter()
+kernel, kernel_cpu = b.advance, [0.0]
+def timed(*args):  # the kernel's CPU time (the process's: every thread)
+    c = time.process_time()
+    try:
+        return kernel(*args)
+    finally:
+        kernel_cpu[0] += time.process_time() - c
+b.advance = timed
+w, c = time.perf_counter(), time.process_time()
 frames = sum(1 for _ in b.frames())
 out["backend"] = time.perf_counter() - w
+out["backend_cpu"] = time.process_time() - c
 out["backend_kernel"] = b.stats["kernel_s"]
-w = time.perf_counter()
+out["backend_kernel_cpu"] = kernel_cpu[0]
+w, c = time.perf_counter(), time.process_time()
 r = run(scene, "fast", dt=dt)
 out["run"] = time.perf_counter() - w
+out["run_cpu"] = time.process_time() - c
 out["kernel"] = r.stats["kernel_s"]
 out["frames"] = frames
 print(json.dumps(out))
@@ -105,8 +121,22 @@ def child(tree: Path, code: str, *args) -> tuple[dict, float, list]:
                          capture_output=True, text=True)
     wall = time.perf_counter() - t
     if res.returncode != 0:
-        raise RuntimeError(f"{tree}: {res.stderr.strip().splitlines()[-1:]}")
+        raise RuntimeError(f"{tree}: exit status {res.returncode}: "
+                           f"{res.stderr.strip().splitlines()[-1:]}")
     return json.loads(res.stdout.strip().splitlines()[-1]), wall, [load0, os.getloadavg()]
+
+
+def busy_processes() -> list:
+    """``[pid, %cpu, command]`` of the processes using more than 10 % of a core (``ps``,
+    averaged over each one's life), other than this one: the machine's other work."""
+    try:
+        out = subprocess.run(["ps", "-eo", "pid=,pcpu=,comm="], capture_output=True,
+                             text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return []
+    rows = [line.split(None, 2) for line in out.splitlines()]
+    return [[int(r[0]), float(r[1]), r[2]] for r in rows
+            if len(r) == 3 and int(r[0]) != os.getpid() and float(r[1]) > 10.0]
 
 
 def spread(values) -> dict:
@@ -118,12 +148,14 @@ def spread(values) -> dict:
 def micro_star(trees: dict, dts, repeats: int) -> dict:
     out = {}
     for dt in dts:
-        raw = {k: {"kernel": [], "backend": [], "backend_kernel": [], "run": [], "process": [],
-                   "imports": [], "setup_and_run": [], "loads": []} for k in trees}
+        timed = ("kernel", "backend", "backend_kernel", "run", "backend_cpu",
+                 "backend_kernel_cpu", "run_cpu")
+        raw = {k: {**{key: [] for key in timed}, "process": [], "imports": [],
+                   "setup_and_run": [], "loads": []} for k in trees}
         for _ in range(repeats):
             for k, tree in trees.items():
                 r, _, loads = child(tree, MICRO_STAR, dt, "frames")
-                for key in ("kernel", "backend", "backend_kernel", "run"):
+                for key in timed:
                     raw[k][key].append(r[key])
                 p, wall, loads2 = child(tree, MICRO_STAR, dt, "process")
                 raw[k]["process"].append(wall)
@@ -136,11 +168,17 @@ def micro_star(trees: dict, dts, repeats: int) -> dict:
             row["loads"] = raw[k]["loads"]
             row["backend_over_kernel"] = row["backend"]["median"] / row["backend_kernel"]["median"]
             row["run_over_kernel"] = row["run"]["median"] / row["kernel"]["median"]
+            row["backend_over_kernel_cpu"] = (row["backend_cpu"]["median"]
+                                              / row["backend_kernel_cpu"]["median"])
+            row["run_cpu_over_kernel_cpu"] = (row["run_cpu"]["median"]
+                                              / row["backend_kernel_cpu"]["median"])
             case[k] = row
             print(f"micro-star dt = {dt}: {k:6s} kernel {row['kernel']['median']:.3f} s, "
                   f"backend {row['backend']['median']:.3f} s "
-                  f"({row['backend_over_kernel']:.2f}x its kernel), run "
-                  f"{row['run']['median']:.3f} s, process {row['process']['median']:.2f} s "
+                  f"({row['backend_over_kernel']:.2f}x its kernel; CPU time "
+                  f"{row['backend_over_kernel_cpu']:.2f}x), run "
+                  f"{row['run']['median']:.3f} s ({row['run_over_kernel']:.2f}x; CPU "
+                  f"{row['run_cpu_over_kernel_cpu']:.2f}x), process {row['process']['median']:.2f} s "
                   f"(imports {row['imports']['median']:.2f} s)", flush=True)
         out[f"dt={dt}"] = case
     return out
@@ -169,22 +207,32 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smoke run: few repeats, N <= 1e5")
     ap.add_argument("--repeats", type=int, default=None)
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--note", default="", help="stored with the results (what the trees are)")
+    ap.add_argument("--parts", default="micro_star,ns_per_bead_step",
+                    help="comma-separated: micro_star, ns_per_bead_step (default both)")
     args = ap.parse_args(argv)
     trees = {"after": AFTER} if args.before is None else {"before": args.before, "after": AFTER}
     repeats = args.repeats or (2 if args.quick else 5)
     sizes = [10000, 100000] if args.quick else [10000, 100000, 1000000]
     bead_steps = 2e6 if args.quick else BEAD_STEPS
+    parts = set(args.parts.split(","))
+    if not parts or not parts <= {"micro_star", "ns_per_bead_step"}:
+        ap.error(f"--parts: micro_star and/or ns_per_bead_step, not {args.parts!r}")
     for tree in trees.values():  # compile / load every variant used, outside the timings
         child(tree, MICRO_STAR, 0.01, "process")
-        for name in ("micro-star", "macro-hertz"):
+        for name in ("micro-star", "macro-hertz") if "ns_per_bead_step" in parts else ():
             child(tree, PER_BEAD, name, 100, 1, 1e4)
     result = {"benchmark": "fast backend: frame overhead, start-up, ns per bead-step",
-              "trees": {k: str(v) for k, v in trees.items()}, "quick": args.quick,
-              "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+              "trees": {k: str(v) for k, v in trees.items()}, "note": args.note,
+              "quick": args.quick, "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
               "python": platform.python_version(), "load_at_start": os.getloadavg(),
-              "micro_star": micro_star(trees, (0.0025, 0.01), repeats),
-              "ns_per_bead_step": per_bead(trees, sizes, repeats, bead_steps),
-              "load_at_end": os.getloadavg()}
+              "busy_at_start": busy_processes()}
+    if "micro_star" in parts:
+        result["micro_star"] = micro_star(trees, (0.0025, 0.01), repeats)
+    if "ns_per_bead_step" in parts:
+        result["ns_per_bead_step"] = per_bead(trees, sizes, repeats, bead_steps)
+    result["load_at_end"] = os.getloadavg()
+    result["busy_at_end"] = busy_processes()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out}")

@@ -52,8 +52,15 @@ class Event:
     kind: int  # CLOSE = 1, OPEN = 0
 
 
-@dataclass
+@dataclass(slots=True)
 class Frame:
+    """One stored output time.  ``ledger_block``: None, or the
+    :class:`LedgerBlock` of the block of frames this one came in (a backend that makes
+    frames by blocks, the fast one, computes their ledgers together), this frame being its
+    row ``block_row``; the driver then reads the frame's ledger there instead of computing
+    it.  A frame made from another with other states (``dataclasses.replace``) must set
+    ``ledger_block=None``."""
+
     step: int
     time: float
     x: np.ndarray  # [n] displacement
@@ -62,6 +69,37 @@ class Frame:
     dissipated_viscous: float
     dissipated_hysteresis: float
     events: list = field(default_factory=list)  # Events in (previous frame time, time]
+    ledger_block: "LedgerBlock | None" = None
+    block_row: int = 0
+
+    def ledger(self, model) -> dict:
+        """The energy ledger of this frame (:meth:`~mdgran.chain.ChainModel.ledger` of
+        ``model``, the backend's), from its block's if it has one (bitwise the same)."""
+        if self.ledger_block is not None:
+            return self.ledger_block[self.block_row]
+        return model.ledger(self.x, self.v, self.closed, self.dissipated_viscous,
+                            self.dissipated_hysteresis)
+
+
+class LedgerBlock:
+    """The energy ledgers of a block of ``F`` frames, computed together
+    (:meth:`~mdgran.chain.ChainModel.ledger_rows`: bitwise each frame's own ledger) when the
+    first is read: ``block[k]`` is frame ``k``'s ledger dict.  Built from the frames' states,
+    ``x``, ``v`` [F, n], ``closed`` [F, n_contacts], the dissipated energies [F], which
+    must not change after."""
+
+    __slots__ = ("_model", "_states", "_rows")
+
+    def __init__(self, model, x, v, closed, dissipated_viscous, dissipated_hysteresis):
+        self._model = model
+        self._states = (x, v, closed, dissipated_viscous, dissipated_hysteresis)
+        self._rows = None
+
+    def __getitem__(self, k: int) -> dict:
+        if self._rows is None:
+            self._rows = self._model.ledger_rows(*self._states)
+            self._states = None
+        return self._rows[k]
 
 
 class Backend:

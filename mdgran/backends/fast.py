@@ -46,7 +46,7 @@ from ..contact import ContactTable
 from ..contact_scalar import schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
-from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError, LedgerBlock
 
 EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
@@ -140,11 +140,11 @@ class FastBackend(Backend):
         come per step, by contact)."""
         if hi <= lo:
             return []
-        nums = self.model.contact_numbers
         log = self.ks.log
         order = lo + np.argsort(log.time[lo:hi], kind="stable")
-        return [Event(float(log.time[i]), int(nums[log.contact[i]]),
-                      CLOSE if log.kind[i] == 1 else OPEN) for i in order]
+        return [Event(t, c, CLOSE if k == 1 else OPEN) for t, c, k in zip(
+            log.time[order].tolist(), self.model.contact_numbers[log.contact[order]].tolist(),
+            log.kind[order].tolist())]
 
     def _check(self):
         status = int(self.counters["status"])
@@ -181,8 +181,8 @@ class FastBackend(Backend):
         """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
         so a resumed run is bitwise identical), ``closed``, ``d_hyst``, ``i_out``."""
-        frame, a, power = self._last
-        y = np.concatenate([frame.x, frame.v, a, [frame.dissipated_viscous, power]])
+        frame, a, sums, k = self._last  # a, sums: the rows of the frame's block
+        y = np.concatenate([frame.x, frame.v, a[k], [frame.dissipated_viscous, sums[k, 2]]])
         return {"t": float(self._out_times[frame.step]), "y": y,
                 "closed": frame.closed.copy(), "d_hyst": frame.dissipated_hysteresis,
                 "i_out": int(frame.step)}
@@ -225,7 +225,8 @@ class FastBackend(Backend):
             self._check()
             i_out = 0
             frame = self._frame(0, 0.0, self._take_events())
-            self._last = (frame, now.a.copy(), self._count["power"].item())
+            power = self._count["power"].item()  # as a block's row: a [1, n], sums [1, 3]
+            self._last = (frame, now.a.copy()[None], np.array([[0.0, 0.0, power]]), 0)
             yield frame
         else:
             y = np.asarray(resume["y"], dtype=float)
@@ -241,10 +242,31 @@ class FastBackend(Backend):
         finally:
             self.stats["wall_time_s"] = _time.perf_counter() - wall0
 
+    def _block_frames(self, i, block, done, times) -> tuple[list, int]:
+        """Frames ``i .. i + done - 1``, of the first ``done`` rows of ``block`` (their arrays
+        are views of its rows; their ledgers are computed together when the driver reads the
+        first, :class:`~mdgran.backends.base.LedgerBlock`), each with its events (the pending
+        ones first); and the log's count of events up to the last of them."""
+        xs, vs, states = block.x[:done], block.v[:done], block.closed[:done]
+        sums = block.sums[:done]  # (D_viscous, D_hysteresis, power) at each frame
+        ledgers = LedgerBlock(self.model, xs, vs, states, sums[:, 0], sums[:, 1])
+        frames = [Frame(i + k, t, x, v, closed, d_visc, d_hyst, [], ledgers, k)
+                  for k, (x, v, closed, (d_visc, d_hyst, _), t)
+                  in enumerate(zip(xs, vs, states, sums.tolist(), times))]
+        ends = block.counts[:done, 0]  # the log's count of events at each frame
+        starts = np.concatenate(([0], ends[:-1]))
+        for k in np.flatnonzero(ends > starts).tolist():  # the frames with events
+            frames[k].events = self._events(int(starts[k]), int(ends[k]))
+        if self._pending and frames:  # events of an earlier call's unfinished frame
+            frames[0].events = self._pending + frames[0].events
+            self._pending = []
+        return frames, (int(ends[-1]) if done else 0)
+
     def _frames_from(self, i, out_times, kernel_args):
         """Frames ``i ..`` to the end: the kernel runs a block of frames per call (about
         BLOCK_BEAD_STEPS bead-steps), their states copied into a fresh :class:`FrameBlock`
-        (the frames' arrays are views of its rows)."""
+        (the frames' arrays are views of its rows, and their ledgers are computed together
+        when the driver asks for the first: :class:`~mdgran.backends.base.LedgerBlock`)."""
         n, m, spf, stats = self.model.n, self.model.n_contacts, self.steps_per_frame, self.stats
         status, events = self._count["status"], self._count["events"]
         per_call = max(1, int(BLOCK_BEAD_STEPS // (n * spf)))
@@ -255,7 +277,6 @@ class FastBackend(Backend):
             k0 = clock()
             done = self.advance(*kernel_args, fk.plain(block), i, nframes, spf, self.dt)
             stats["kernel_s"] += clock() - k0
-            lo = 0  # the log's events up to the frame before
             times = out_times[i:i + done].tolist()
             bad = None  # a non-finite state: the frames before it, then the error
             try:
@@ -264,20 +285,13 @@ class FastBackend(Backend):
                 bad = exc
                 done = next(k for k in range(done) if not np.all(
                     np.isfinite(block.x[k]) & np.isfinite(block.v[k])))
-            rows = zip(block.x[:done], block.v, block.closed, block.a,
-                       block.sums[:done].tolist(), block.counts[:done].tolist(), times)
-            for k, (x, v, closed, a, (d_visc, d_hyst, power), (hi, substeps), t) in \
-                    enumerate(rows):
-                evs = self._events(lo, hi)
-                if self._pending:
-                    evs, self._pending = self._pending + evs, []
-                lo = hi
+            frames, lo = self._block_frames(i, block, done, times)
+            a, sums = block.a, block.sums  # for checkpoint_state: sums[k, 2] is the power
+            substeps = block.counts[:done, 1].tolist()
+            for k, frame in enumerate(frames):
                 stats["steps"] = (i + k) * spf
-                stats["event_substeps"] = substeps
-                frame = Frame(step=i + k, time=t, x=x, v=v, closed=closed,
-                              dissipated_viscous=d_visc, dissipated_hysteresis=d_hyst,
-                              events=evs)
-                self._last = (frame, a, power)
+                stats["event_substeps"] = substeps[k]
+                self._last = (frame, a, sums, k)
                 yield frame
             if bad is not None:
                 raise bad

@@ -1,0 +1,62 @@
+"""The ledger of a block of states (ChainModel.ledger_block, what the fast backend hands the
+driver with its frames) is bitwise the ledger of each state alone (ChainModel.ledger, what
+every other backend's frames get): random states on every law, boundary and substrate, chain
+lengths around numpy's and BLAS's summation blocks, and a fast run frame by frame."""
+import numpy as np
+import pytest
+
+from mdgran.backends.fast import FastBackend
+from mdgran.chain import model_from_scene, row_dots
+from mdgran.scene import load_scene
+
+SCENES = [
+    ("micro-star", []),  # Schwarz, displacement snap-off, walls, k1, damping
+    ("macro-hertz", []),  # Hertz
+    ("dmt-chain", []),
+    ("collision-pair", []),  # free chain with an initial gap
+    ("hard/jkr-force", [("substrate.k3", 0.05)]),  # force rule, cubic substrate
+]
+
+
+def random_block(model, frames, rng):
+    """``frames`` random states of ``model``: compressions of order 1 (p), some contacts
+    open, dissipated energies of order 10."""
+    x = rng.standard_normal((frames, model.n)) * rng.choice([1e-3, 0.3, 2.0], (frames, 1))
+    v = rng.standard_normal((frames, model.n)) * 5.0
+    closed = rng.random((frames, model.n_contacts)) < 0.7
+    return x, v, closed, 10.0 * rng.random(frames), 10.0 * rng.random(frames)
+
+
+@pytest.mark.parametrize("name, overrides", SCENES)
+@pytest.mark.parametrize("n", [1, 2, 20, 129, 1000])
+def test_block_ledger_is_the_ledger_of_each_state(name, overrides, n):
+    if name == "collision-pair" and n == 1:
+        pytest.skip("a free chain needs two beads")
+    model = model_from_scene(load_scene(name, [*overrides, ("chain.n", n)]))
+    rng = np.random.default_rng(n)
+    x, v, closed, dv, dh = random_block(model, 40, rng)
+    rows = model.ledger_rows(x, v, closed, dv, dh)
+    for k, row in enumerate(rows):
+        one = model.ledger(x[k], v[k], closed[k], float(dv[k]), float(dh[k]))
+        assert list(row) == list(one)
+        assert [float(a).hex() for a in row.values()] == [float(b).hex() for b in one.values()]
+
+
+def test_row_dots_is_np_dot_of_each_row():
+    rng = np.random.default_rng(3)
+    for n in (1, 7, 33, 100, 4097):
+        a = rng.standard_normal((25, n)) * 10.0 ** rng.integers(-6, 6, (25, 1))
+        assert np.array_equal(row_dots(a), np.array([np.dot(r, r) for r in a]))
+
+
+def test_fast_frames_carry_their_ledgers():
+    """Every frame of a fast run (events included) hands the driver the ledger that
+    ChainModel.ledger computes from the frame itself."""
+    b = FastBackend(load_scene("micro-star", [("run.duration", 60.0)]))
+    frames = list(b.frames())
+    assert len(frames) == 601 and b.stats["events"] > 0
+    for f in frames:
+        one = b.model.ledger(f.x, f.v, f.closed, f.dissipated_viscous, f.dissipated_hysteresis)
+        got = f.ledger_block[f.block_row] if f.ledger_block is not None else one
+        assert [float(a).hex() for a in got.values()] == [float(b).hex() for b in one.values()]
+    assert sum(f.ledger_block is not None for f in frames) == 600  # all but the first
