@@ -11,7 +11,10 @@ bound), ``"failed: ..."``, or ``"interrupted"``).
   ``/parameters`` attribute ``status``).  An interrupted or killed run leaves nothing under the
   requested name; with checkpoints on, it leaves ``NAME.h5.partial`` to resume from.
   It always stores every contact's state per frame (``/observables/contacts/closed``); with
-  ``output.contacts`` on, also its compression and force (``docs/output.md``).
+  ``output.contacts`` on, also its compression and force (``docs/output.md``).  For long
+  chains, ``output.bead_stride`` stores every k-th bead (and contact) only, or none, and
+  ``output.compression`` compresses those series; chunks and the buffer are sized in bytes
+  (:func:`chunk_shape`, :func:`buffer_frames`).
 * :class:`MemoryReporter` collects a :class:`~mdgran.run_record.Run` (with the contacts'
   states per frame).
 * :class:`ProgressReporter` (in :mod:`mdgran.progress`) draws a labelled progress bar on stderr.
@@ -30,7 +33,24 @@ from . import checkpoint
 from .storage import OutputLock, StorageError, abandon, reason
 from .run_record import LEDGER_NAMES, Run
 
-H5MD_BLOCK = 512  # frames buffered in memory between writes
+H5MD_BLOCK = 512  # at most this many frames buffered in memory between writes ...
+#: ... and at most this many bytes of their per-bead and per-contact values (whole frames, at
+#: least one: a frame of a 1e6-bead chain is 17 MB, so 3 frames are buffered)
+H5MD_BUFFER_BYTES = 64 << 20
+#: target size in bytes of one HDF5 chunk of a per-bead or per-contact series (rows of frames,
+#: or, where one frame is larger, one frame split along the beads)
+CHUNK_BYTES = 2 << 20
+#: HDF5 file format versions the writer may use: from HDF5 1.8's (2008), whose object headers
+#: hold attributes above 64 kB (``/observables/contacts@contact`` of a 1e6-bead chain is 8 MB;
+#: the older format refuses it: "object header message is too large")
+H5_LIBVER = ("v108", "latest")
+#: ``output.compression`` -> h5py filter options of the per-bead and per-contact series
+#: (byte shuffle first: the bytes of neighbouring values then compress together)
+COMPRESSION = {
+    "none": {},
+    "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True},
+    "lzf": {"compression": "lzf", "shuffle": True},
+}
 #: per-contact time series under /observables/contacts: name -> dtype, unit (nondimensional,
 #: physics.md section 1), description.  ``closed`` is always stored; the others with
 #: ``output.contacts`` (:data:`CONTACT_DETAIL`)
@@ -43,6 +63,41 @@ CONTACT_SERIES = {
 }
 #: the series of :data:`CONTACT_SERIES` stored only with ``output.contacts``
 CONTACT_DETAIL = ("compression", "force")
+
+
+def chunk_shape(shape: tuple, itemsize: int, target: int = CHUNK_BYTES) -> tuple:
+    """HDF5 chunk of a series whose frames have ``shape`` (e.g. ``(n,)`` or ``(n, 3)``) of
+    ``itemsize``-byte values: about ``target`` bytes, as whole frames (at most 1024 of them)
+    when a frame is smaller than ``target``, else one frame split along its first axis (the
+    beads or contacts): for n = 1e6 doubles, chunks of (1, 262144) = 2 MiB instead of one 8 MB
+    frame."""
+    shape = tuple(int(d) for d in shape)
+    size = int(np.prod(shape, dtype=np.int64))
+    if size == 0:
+        return (1024,) + shape
+    frame = itemsize * size
+    if frame <= target:
+        return (max(1, min(1024, target // frame)),) + shape
+    inner = itemsize * int(np.prod(shape[1:], dtype=np.int64))
+    return (1, max(1, min(shape[0], target // inner))) + shape[1:]
+
+
+def buffer_frames(frame_bytes: float) -> int:
+    """Frames the writer buffers between writes, with ``frame_bytes`` bytes of per-bead and
+    per-contact values per frame: at most :data:`H5MD_BLOCK` and :data:`H5MD_BUFFER_BYTES`,
+    at least 1."""
+    return int(max(1, min(H5MD_BLOCK, H5MD_BUFFER_BYTES // max(1.0, float(frame_bytes)))))
+
+
+def stored_beads(n: int, stride: int) -> np.ndarray:
+    """1-based numbers of the beads whose series a file stores (``output.bead_stride``):
+    ``1, 1 + k, ...`` up to ``n`` for stride ``k >= 1``; none for stride 0."""
+    return np.arange(1, n + 1, stride, dtype=np.int64) if stride else np.zeros(0, np.int64)
+
+
+def stored_bead_count(n: int, stride: int) -> int:
+    """``len(stored_beads(n, stride))`` without building the array: ``ceil(n / stride)``."""
+    return len(range(0, n, stride)) if stride else 0
 
 
 def software_versions() -> dict:
@@ -69,18 +124,24 @@ class MemoryReporter:
 
     def __init__(self):
         self.time, self.x, self.v, self.closed = [], [], [], []
-        self.ledger = {k: [] for k in LEDGER_NAMES}
+        self.ledgers = []  # each frame's ledger dict
         self.events = []
         self.status = None
 
     def report(self, frame, ledger):
+        """Keep the frame's arrays as they are (a backend hands every frame arrays of its own,
+        which it does not change after) and its ledger."""
         self.time.append(frame.time)
         self.x.append(frame.x)
         self.v.append(frame.v)
-        self.closed.append(np.array(frame.closed, dtype=bool))
-        for k in LEDGER_NAMES:
-            self.ledger[k].append(ledger[k])
+        self.closed.append(frame.closed)
+        self.ledgers.append(ledger)
         self.events.extend(frame.events)
+
+    @property
+    def ledger(self) -> dict:
+        """``{term: [its value at each frame so far]}``, for the terms of LEDGER_NAMES."""
+        return {k: [led[k] for led in self.ledgers] for k in LEDGER_NAMES}
 
     def close(self, status):
         self.status = status
@@ -142,6 +203,11 @@ class H5MDWriter:
         self.positions = scene.data["output"]["positions"] if positions is None else positions
         self.contacts = (bool(scene.data["output"].get("contacts", False)) if contacts is None
                          else bool(contacts))
+        out = scene.data["output"]
+        self.stride = int(out.get("bead_stride", 1))
+        self.filters = COMPRESSION[out.get("compression", "none")]
+        self.bead_ids = stored_beads(self.model_n, self.stride)
+        self._beads = slice(0, self.model_n, self.stride or 1)  # stored columns of x, v
         self.model = None  # the scene's ChainModel (contact numbering, compressions, forces)
         self.backend = backend if backend is not None else getattr(state_source, "__self__",
                                                                    None)
@@ -155,7 +221,9 @@ class H5MDWriter:
         self._frames = 0
         self._last_step = None
         self._last_checkpoint = _time.perf_counter()
-        self._digest = checkpoint.DataDigest()
+        # running checksums of the written rows, for checkpoints only (at 1e6 beads hashing
+        # costs ~0.1 s per frame)
+        self._digest = checkpoint.DataDigest() if checkpoint_every is not None else None
         self.resume_state = None
         self.resume_e0 = None
         self.resume_max_error = 0.0
@@ -168,8 +236,9 @@ class H5MDWriter:
                     raise checkpoint.CheckpointError(
                         f"{self.tmp} holds an unfinished run: resume it (--resume), or delete "
                         "it to start afresh")
-                self.f = self._guard(h5py.File, self.tmp, "w")
+                self.f = self._guard(lambda: h5py.File(self.tmp, "w", libver=H5_LIBVER))
                 self._guard(self._init_file, backend_name)
+            self._block = buffer_frames(self.frame_bytes())
         except BaseException:
             self.lock.release()
             raise
@@ -203,6 +272,21 @@ class H5MDWriter:
         self._frames = int(meta["frames"])
         self.f = self._guard(h5py.File, self.tmp, "r+")
         self._guard(self._open_existing, int(meta["events"]))
+
+    def frame_bytes(self) -> int:
+        """Bytes of per-bead and per-contact values one frame adds to the buffer: x and v of
+        the stored beads, their positions at a flush (3 values), 1 byte per stored contact for
+        its state and 16 more with ``output.contacts``."""
+        per_bead = 8 * (2 + (3 if self.positions else 0))
+        per_contact = 17 if self.contacts else 1
+        return (per_bead * len(self.bead_ids)
+                + per_contact * len(range(*self._contacts.indices(self.model.n_contacts))))
+
+    @property
+    def _contacts(self) -> slice:
+        """Stored columns of the per-contact series: every ``bead_stride``-th contact from the
+        first (none for stride 0)."""
+        return slice(0, self.model.n_contacts if self.stride else 0, self.stride or 1)
 
     def _series_paths(self, f) -> list:
         chain = [f"particles/chain/{name}" for name in ("displacement", "velocity", "position")
@@ -249,7 +333,7 @@ class H5MDWriter:
             sc = self.scene.scales
             self._pos_scale, self._t_scale = (sc.p * 1e9, sc.time * 1e12) if sc else (1.0, 1.0)
             spacing = sc.diameter * 1e9 if sc else 1.0
-            self._rest = spacing * np.arange(1, self.model_n + 1)
+            self._rest = spacing * self.bead_ids
 
     # ---- layout ----------------------------------------------------------------------------
     def _init_file(self, backend_name):
@@ -277,13 +361,21 @@ class H5MDWriter:
         par.attrs["mpi_world_size"] = np.int64(self.mpi_world_size())
         chain = f.create_group("particles/chain")
         self._series = {}
-        for name in ("displacement", "velocity"):
-            self._series[name] = self._make_series(chain, name, (n,))
-        if self.positions:
+        n = len(self.bead_ids)
+        if self.stride != 1:
+            chain.attrs["bead_stride"] = np.int64(self.stride)
+            ids = chain.create_dataset("id", data=self.bead_ids)
+            ids.attrs["description"] = ("1-based number of the bead of each column of the "
+                                        "per-bead series (output.bead_stride); absent: every "
+                                        "bead 1..n")
+        for name in ("displacement", "velocity")[:2 if n else 0]:
+            self._series[name] = self._make_series(chain, name, (n,), filters=self.filters)
+        if self.positions and n:
             box = chain.create_group("box")
             box.attrs["dimension"] = np.int32(3)
             box.attrs["boundary"] = np.array([b"none"] * 3)
-            self._series["position"] = self._make_series(chain, "position", (n, 3))
+            self._series["position"] = self._make_series(chain, "position", (n, 3),
+                                                         filters=self.filters)
             if sc is not None:
                 self._series["position"]["value"].attrs["unit"] = "nm"
                 self._series["position"]["time"].attrs["unit"] = "ps"
@@ -291,7 +383,7 @@ class H5MDWriter:
                     sc.time * 1e12
             else:
                 spacing, self._pos_scale, self._t_scale = 1.0, 1.0, 1.0
-            self._rest = spacing * np.arange(1, n + 1)
+            self._rest = spacing * self.bead_ids
             # the standard H5MD view for generic readers (MDAnalysis opens the first particle
             # group and reads its "velocity" as 3-vectors, which chain/velocity is not):
             # hard links, not copies
@@ -302,13 +394,17 @@ class H5MDWriter:
         for name in LEDGER_NAMES:
             self._series[name] = self._make_series(obs, name, ())
         model = self._contact_model()
+        if not self.stride:  # no per-contact series
+            self._init_events(f)
+            return
         g = obs.create_group("contacts")
-        g.attrs["contact"] = np.asarray(model.contact_numbers, dtype=np.int64)
+        g.attrs["contact"] = np.asarray(model.contact_numbers, dtype=np.int64)[self._contacts]
         g.attrs["numbering"] = ("value column j is contact number contact[j]; contact i joins "
                                 "bead i-1 and bead i (beads 0, n+1: walls), as in /events")
         for name in self._contact_names():
             dtype, unit, doc = CONTACT_SERIES[name]
-            series = self._make_series(g, name, (model.n_contacts,), dtype)
+            series = self._make_series(g, name, (len(g.attrs["contact"]),), dtype,
+                                       filters=self.filters)
             if unit:
                 series["value"].attrs["unit"] = unit
             series["value"].attrs["description"] = doc
@@ -316,6 +412,9 @@ class H5MDWriter:
         if self.contacts:
             g["force"].attrs["damping"] = float(model.damping)
             g["force"].attrs["includes_damping"] = np.int8(bool(model.damping))
+        self._init_events(f)
+
+    def _init_events(self, f):
         ev = f.create_group("events")
         self._ev = {k: ev.create_dataset(k, (0,), maxshape=(None,), dtype=dt, chunks=(4096,))
                     for k, dt in (("time", "f8"), ("contact", "i8"), ("kind", "i1"))}
@@ -323,14 +422,17 @@ class H5MDWriter:
         ev.attrs["contact"] = "contact i joins bead i-1 and bead i (beads 0, n+1: walls)"
 
     @staticmethod
-    def _make_series(parent, name, shape, dtype="f8"):
+    def _make_series(parent, name, shape, dtype="f8", filters=None):
+        """A H5MD time series ``name`` with frames of ``shape``: ``step``, ``time`` and a
+        ``value`` chunked by :func:`chunk_shape`, with the h5py ``filters``
+        (:data:`COMPRESSION`) if given."""
         g = parent.create_group(name)
-        chunk = max(1, min(1024, (1 << 18) // max(1, int(np.prod(shape)))))
         return {
             "step": g.create_dataset("step", (0,), maxshape=(None,), dtype="i8", chunks=(4096,)),
             "time": g.create_dataset("time", (0,), maxshape=(None,), dtype="f8", chunks=(4096,)),
             "value": g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape,
-                                      dtype=dtype, chunks=(chunk,) + shape),
+                                      dtype=dtype, chunks=chunk_shape(shape, np.dtype(
+                                          dtype).itemsize), **(filters or {})),
         }
 
     def _contact_names(self, obs=None) -> list:
@@ -388,15 +490,19 @@ class H5MDWriter:
     def report(self, frame, ledger):
         if self.mpi_ranks is None:  # the backend has started: its communicator is known
             self.mpi_ranks = self.mpi_ranks_of(self.backend)
-        per_contact = {"closed": np.asarray(frame.closed, dtype=np.int8).copy()}
+        cols = self._contacts
+        per_contact = {"closed": np.asarray(frame.closed, dtype=np.int8)[cols].copy()}
         if self.contacts:
             m = self.model
-            per_contact["compression"] = m.compressions(frame.x)
-            per_contact["force"] = m.contact_forces(frame.x, frame.v, frame.closed)
-        self._buf.append((frame.step, frame.time, frame.x, frame.v, ledger, per_contact))
+            per_contact["compression"] = m.compressions(frame.x)[cols]
+            per_contact["force"] = m.contact_forces(frame.x, frame.v, frame.closed)[cols]
+        x, v = frame.x, frame.v
+        if self.stride != 1:  # copies of the stored beads (a view would keep all of them)
+            x, v = x[self._beads].copy(), v[self._beads].copy()
+        self._buf.append((frame.step, frame.time, x, v, ledger, per_contact))
         self._events.extend(frame.events)
         self._last_step = frame.step
-        if len(self._buf) >= H5MD_BLOCK:
+        if len(self._buf) >= self._block:
             self._guard(self._flush)
         if (self.checkpoint_every is not None
                 and _time.perf_counter() - self._last_checkpoint >= self.checkpoint_every):
@@ -421,22 +527,28 @@ class H5MDWriter:
             ds = series[key]
             ds.resize(k1, axis=0)
             ds[k0:k1] = data
-            self._digest.update(f"{path}/{key}", data, ds.dtype)
+            if self._digest is not None:
+                self._digest.update(f"{path}/{key}", data, ds.dtype)
+
+    def _flush_beads(self, steps, times):
+        """Append the buffered frames' per-bead series (the stored beads only)."""
+        chain = "particles/chain"
+        x = np.array([b[2] for b in self._buf])
+        self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x)
+        self._append(f"{chain}/velocity", self._series["velocity"], steps, times,
+                     np.array([b[3] for b in self._buf]))
+        if self.positions:
+            pos = np.zeros(x.shape + (3,))
+            pos[..., 0] = self._rest + x * self._pos_scale
+            self._append(f"{chain}/position", self._series["position"], steps,
+                         times * self._t_scale, pos)
 
     def _flush(self):
         if self._buf:
             steps = np.array([b[0] for b in self._buf], dtype=np.int64)
             times = np.array([b[1] for b in self._buf])
-            x = np.array([b[2] for b in self._buf])
-            chain = "particles/chain"
-            self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x)
-            self._append(f"{chain}/velocity", self._series["velocity"], steps, times,
-                         np.array([b[3] for b in self._buf]))
-            if self.positions:
-                pos = np.zeros(x.shape + (3,))
-                pos[..., 0] = self._rest + x * self._pos_scale
-                self._append(f"{chain}/position", self._series["position"], steps,
-                             times * self._t_scale, pos)
+            if "displacement" in self._series:  # not with output.bead_stride = 0
+                self._flush_beads(steps, times)
             for name in LEDGER_NAMES:
                 self._append(f"observables/{name}", self._series[name], steps, times,
                              np.array([b[4][name] for b in self._buf]))
@@ -455,7 +567,8 @@ class H5MDWriter:
                 ds = self._ev[key]
                 ds.resize(k0 + len(ev), axis=0)
                 ds[k0:] = vals
-                self._digest.update(f"events/{key}", vals, ds.dtype)
+                if self._digest is not None:
+                    self._digest.update(f"events/{key}", vals, ds.dtype)
             self._events = []
 
     def close(self, status):

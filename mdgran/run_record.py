@@ -19,6 +19,11 @@ LEDGER_NAMES = ("kinetic_energy", "contact_energy", "substrate_energy",
                 "dissipated_viscous", "dissipated_hysteresis", "total_energy")
 
 
+class DecimatedRecord(ValueError):
+    """A record that stores some beads only (``output.bead_stride``) was asked for every
+    bead: one line naming the key."""
+
+
 def ledger_scale(impulse_energy: float, e0: float) -> float:
     """The energy that ledger errors are measured in (units of eta p): the impulse energy
     ``E_imp = v0^2 / 2``, or ``max(|E0|, 1)`` for a scene without an impulse."""
@@ -60,8 +65,14 @@ class Run:
         time: ``[F]`` frame times (units of ``1/q``), the first 0, one per
             ``run.output_interval``.
         x: ``[F, n]`` bead displacements from their rest places (units of ``p``); bead ``i``
-            (1-based in the scene's keys) is column ``i - 1``.
+            (1-based in the scene's keys) is column ``i - 1``.  A record of a file written
+            with ``output.bead_stride`` != 1 holds some beads only: ``x`` and ``v`` then raise
+            :class:`DecimatedRecord` (one line), as every analysis of them needs every bead.
         v: ``[F, n]`` bead velocities (units of ``p q``).
+        bead_ids: ``[B]`` 1-based numbers of the stored beads (``1, 1 + k, ...`` for
+            ``output.bead_stride = k``; empty for 0); None: every bead.
+        x_stored, v_stored: ``[F, B]`` displacements and velocities of the beads
+            ``bead_ids`` (``x`` and ``v`` for a record of every bead).
         closed: ``[F, n_contacts]`` bool, the state of every contact at every frame (True =
             closed), column ``j`` being contact number ``contact_numbers[j]``.  Stored by the
             run; for a file written without them (by an older mdgran), rebuilt from the events
@@ -80,13 +91,17 @@ class Run:
         status: ``"complete"``, ``"failed: ..."``, ``"ledger-exceeded: ..."`` (``attrs``).
         attrs: more about the run: ``status``, ``scene_name``; read from a file, every attribute
             of its ``/parameters`` group (versions, units, backend_stats, ``mpi_ranks``, ...).
+        path: the file the record was read from (:func:`read_h5`; "" for a run in memory).
         measures: the paper's measures of this run, each computed once
             (:class:`~mdgran.measures.Measures`).
     """
 
     def __init__(self, time, x, v, ledger, ev_time, ev_contact, ev_kind, scene_toml: str = "",
-                 backend: str = "", attrs: dict | None = None, closed=None, scene=None):
-        self.time, self.x, self.v = time, x, v
+                 backend: str = "", attrs: dict | None = None, closed=None, scene=None,
+                 bead_ids=None):
+        self.time, self.x_stored, self.v_stored = time, x, v
+        self.bead_ids = None if bead_ids is None else np.asarray(bead_ids, dtype=np.int64)
+        self.path = ""  # the file it was read from (read_h5)
         self.ledger = ledger
         self.ev_time, self.ev_contact, self.ev_kind = ev_time, ev_contact, ev_kind
         self.scene_toml = scene_toml or (scene.to_toml() if scene is not None else "")
@@ -95,6 +110,40 @@ class Run:
         if scene is not None:
             self.__dict__["scene"] = scene  # the cached property's slot: no parsing
         self._closed = closed
+
+    @property
+    def decimated(self) -> bool:
+        """True for a record that stores some beads only (``output.bead_stride`` != 1)."""
+        return self.bead_ids is not None
+
+    def _every_bead(self, name: str) -> np.ndarray:
+        if self.decimated:
+            k = int(self._data.get("output", {}).get("bead_stride", -1))
+            where = f"{self.path}: " if self.path else ""
+            raise DecimatedRecord(
+                f"{where}output.bead_stride = {k}: the record stores {len(self.bead_ids)} of "
+                f"{self.n} beads, and Run.{name} (every bead, which this analysis needs) is "
+                "not there; run again with output.bead_stride = 1, or read Run.bead_ids and "
+                f"Run.{name}_stored")
+        return self.x_stored if name == "x" else self.v_stored
+
+    @property
+    def x(self) -> np.ndarray:
+        """``[F, n]`` displacements of every bead (see the class docstring)."""
+        return self._every_bead("x")
+
+    @x.setter
+    def x(self, value):
+        self.x_stored = value
+
+    @property
+    def v(self) -> np.ndarray:
+        """``[F, n]`` velocities of every bead (see the class docstring)."""
+        return self._every_bead("v")
+
+    @v.setter
+    def v(self, value):
+        self.v_stored = value
 
     @property
     def closed(self) -> np.ndarray:
@@ -142,8 +191,10 @@ class Run:
     # ---- sizes, numbering, states ------------------------------------------------------------
     @property
     def n(self) -> int:
-        """Number of moving beads."""
-        return self.x.shape[1]
+        """Number of moving beads (the scene's ``chain.n`` for a decimated record)."""
+        if self.decimated:
+            return int(self._data["chain"]["n"])
+        return self.x_stored.shape[1]
 
     @property
     def frames(self) -> int:
@@ -220,15 +271,19 @@ class Run:
             parts.append(f"status={status if len(status) <= 60 else status[:57] + '...'!r}")
         t = np.asarray(self.time)
         span = f"t=[{float(t[0]):.6g}, {float(t[-1]):.6g}]" if t.size else "t=[]"
-        parts += [f"frames={t.size}", f"n={np.shape(self.x)[-1] if np.ndim(self.x) == 2 else 0}",
-                  span, f"events={len(self.ev_time)}"]
+        n = self.n if self.decimated or np.ndim(self.x_stored) == 2 else 0
+        beads = f" (beads stored: {len(self.bead_ids)})" if self.decimated else ""
+        parts += [f"frames={t.size}", f"n={n}{beads}", span, f"events={len(self.ev_time)}"]
         return f"Run({', '.join(parts)})"
 
 
 def read_h5(path) -> Run:
     """Read an mdgran H5MD file back into a :class:`Run` (also ``mdgran.read``).  The contact
     states come from ``/observables/contacts/closed``; a file written without them (an older
-    mdgran, ``output.contacts`` off) gets them rebuilt from its events."""
+    mdgran) gets them rebuilt from its events.  A file written with ``output.bead_stride``
+    != 1 (``/particles/chain/id`` lists its beads) gives a decimated record
+    (:attr:`Run.bead_ids`, :attr:`Run.x_stored`; :attr:`Run.x` raises), whose contact states
+    of every contact are rebuilt from its events (complete in every file)."""
     import h5py
 
     with h5py.File(path, "r") as f:
@@ -241,13 +296,18 @@ def read_h5(path) -> Run:
         led = {name: f[f"observables/{name}/value"][()] for name in LEDGER_NAMES}
         attrs = {k: (v.decode() if isinstance(v, bytes) else v)
                  for k, v in f["parameters"].attrs.items()}
+        bead_ids = chain["id"][()] if "id" in chain else None
         closed = None
-        if "observables/contacts/closed/value" in f:
+        if "observables/contacts/closed/value" in f and bead_ids is None:
             closed = f["observables/contacts/closed/value"][()].astype(bool)
-        return Run(
-            time=chain["displacement/time"][()],
-            x=chain["displacement/value"][()],
-            v=chain["velocity/value"][()],
+        if "displacement" in chain:
+            time = chain["displacement/time"][()]
+            x, v = chain["displacement/value"][()], chain["velocity/value"][()]
+        else:  # output.bead_stride = 0: no per-bead series
+            time = f["observables/total_energy/time"][()]
+            x = v = np.zeros((len(time), 0))
+        rec = Run(
+            time=time, x=x, v=v, bead_ids=bead_ids,
             ledger=led,
             ev_time=f["events/time"][()],
             ev_contact=f["events/contact"][()],
@@ -257,3 +317,5 @@ def read_h5(path) -> Run:
             attrs=attrs,
             closed=closed,
         )
+    rec.path = str(path)
+    return rec

@@ -173,6 +173,16 @@ SCHEMA = {
                         "also store /observables/contacts/{compression,force} per frame "
                         "(docs/output.md); off by default: 16 bytes x contacts per frame (the "
                         "contact states, /observables/contacts/closed, are always stored)"),
+        "bead_stride": Key(1, "int>=0", "an integer >= 0 (1: every bead; k > 1: beads 1, 1+k, "
+                           "...; 0: no per-bead series, observables and events only)", "",
+                           "store every k-th bead's displacement, velocity and position (beads "
+                           "1, 1+k, ..., listed in /particles/chain/id) and every k-th contact's "
+                           "series; 0: none; the observables and events stay complete "
+                           "(docs/output.md)"),
+        "compression": Key("none", ("none", "gzip", "lzf"), "'none', 'gzip' (level 4) or "
+                           "'lzf'", "", "HDF5 filter (with byte shuffle) of the per-bead and "
+                           "per-contact series; 'lzf' is fast, 'gzip' smaller and readable "
+                           "everywhere"),
     },
     "material": {
         "diameter": Key(None, "float>0?", "a number in [1e-9, 10] (m)", "m", "bead diameter",
@@ -233,7 +243,7 @@ def _check_value(key: str, value, kind, allowed: str):
                 value = int(value)
             else:
                 raise SceneError(key, f"must be {allowed}, not {value!r}")
-        if value < 1:
+        if value < (0 if kind == "int>=0" else 1):
             raise SceneError(key, f"must be {allowed}, not {value}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -449,6 +459,9 @@ def _resolve(raw: dict):
         raise SceneError("run.output_interval", f"must be at most run.duration = {r['duration']}")
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
+    if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
+        raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
+                         "per-bead or per-contact series); give a stride >= 1 to store them")
     return data, sources
 
 
@@ -637,8 +650,8 @@ def _range_text(sec: str, name: str, kind) -> str:
             return f"\\|v\\| <= {_num(lim[1])}"
         return f"[{_num(lim[0])}, {_num(lim[1])}]"
     return {"int>=1": ">= 1" if f"{sec}.{name}" != "impulse.bead" else "1 to chain.n",
-            "float>=0": ">= 0", "float>0": "> 0", "float": "finite", "fc": "[-2, -1.5]",
-            "tol": "[1e-14, 1e-3]", "nu": "[0, 0.5)", "bool": "true, false",
+            "int>=0": ">= 0", "float>=0": ">= 0", "float>0": "> 0", "float": "finite",
+            "fc": "[-2, -1.5]", "tol": "[1e-14, 1e-3]", "nu": "[0, 0.5)", "bool": "true, false",
             "str": "any string"}[base]
 
 

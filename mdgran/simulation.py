@@ -118,24 +118,26 @@ def available_memory() -> float | None:
 def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
-    H5MD writer's buffer (``H5MD_BLOCK`` frames of x and v and their copies at a flush, plus 3
-    arrays of positions, plus 1 byte per contact for its state, 17 with ``output.contacts``),
+    H5MD writer's buffer (:func:`~mdgran.reporters.buffer_frames` frames of x and v and their
+    copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
+    with ``output.contacts``; of the stored beads, ``output.bead_stride``),
     the frames kept
     in memory (``keep``: x and v, and the copies made for the trajectory, plus ~500 bytes of
     Python objects per frame); on disk x, v (and positions, and the per-contact series) and
     the six observables, each with its step and time."""
-    from .reporters import H5MD_BLOCK
+    from .reporters import buffer_frames, stored_bead_count
 
     n = int(scene.data["chain"]["n"])
+    ns = stored_bead_count(n, int(scene.data["output"].get("bead_stride", 1)))  # stored beads
     r = scene.data["run"]
     frames = int(float(r["duration"]) / float(r["output_interval"]) + 1e-9) + 1
     pos = 3 if scene.data["output"]["positions"] else 0
     detail = bool(scene.data["output"].get("contacts"))
     con = (17.0 if detail else 1.0) / 8.0  # per contact: 2 f8 + 1 i1, or the i1 state alone
-    block = min(frames, H5MD_BLOCK)
-    memory = 8.0 * n * (10 + block * (4 + pos + con)) + (frames * (4 * 8.0 * n + 500) if keep
-                                                          else 0)
-    disk = frames * (8.0 * n * (2 + pos + con) + 16.0 * (2 + (pos > 0) + (3 if detail else 1))
+    block = min(frames, buffer_frames(8.0 * ns * (2 + pos + con)))
+    memory = 8.0 * n * 10 + 8.0 * ns * block * (4 + pos + con) + (
+        frames * (4 * 8.0 * n + 500) if keep else 0)
+    disk = frames * (8.0 * ns * (2 + pos + con) + 16.0 * (2 + (pos > 0) + (3 if detail else 1))
                      + 6 * 24.0)
     return {"n": n, "frames": frames, "memory": memory, "disk": disk}
 
@@ -259,14 +261,13 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         with FrameSections() as sections:
             for frame in (b.frames(resume=start) if start is not None else b.frames()):
                 sections.inside = True
-                led = model.ledger(frame.x, frame.v, frame.closed, frame.dissipated_viscous,
-                                   frame.dissipated_hysteresis)
+                led = frame.ledger(model)  # from the frame's block, if the backend made one
                 if e0 is None:
                     e0 = led["total_energy"]
                     scale = ledger_scale(scene.impulse_energy, e0)
                 max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0,
                                                                  scale)))
-                term_max = max(term_max, max(abs(v) for v in led.values()))
+                term_max = max(term_max, max(map(abs, led.values())))
                 for r in reps:
                     r.report(frame, led)
                 sections.leave()
