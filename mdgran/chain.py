@@ -24,7 +24,7 @@ from functools import cached_property
 import numpy as np
 
 from .contact import ContactLaw
-from .contact_scalar import branch_t_ufunc
+from .contact_scalar import branch_t_ufunc, pow_ufunc
 
 
 # ---- contact numbering and states: the one place that knows them -----------------------------
@@ -199,7 +199,8 @@ class ChainModel:
             return law.energy(delta)
         branch, (c7, c4, c1), a0 = self._schwarz_energy_constants
         t = branch_t_ufunc()(np.asarray(delta, dtype=float), *branch)
-        return (0.4 * t**10 - c7 * t**7 + c4 * t**4 - c1 * t) - a0
+        pw = pow_ufunc()  # the C library's pow, as ContactLaw.energy (bitwise)
+        return (0.4 * pw(t, 10.0) - c7 * pw(t, 7.0) + c4 * pw(t, 4.0) - c1 * t) - a0
 
     def substrate_energy(self, x) -> float:
         e = 0.0

@@ -17,10 +17,12 @@ inverted to machine precision by Newton's method on ``phi(w) = sqrt(delta - delt
 above the root converges monotonically and quadratically even at the snap-off point, where
 ``t(delta)`` has a square-root singularity).  That inversion is
 :func:`mdgran.contact_scalar.branch_t`, the fast kernel's own, applied elementwise.  The
-polynomials in ``t`` (force, energy, stiffness) are evaluated here with numpy's ``**`` and in
-the kernel (:mod:`mdgran.contact_scalar`) with products (``t*t*t``): the two differ in the last
-bit for about a quarter of all ``t``, and both the reference backend and the force table that
-the fast backend interpolates are kept bit for bit as they were, so those lines exist twice.
+polynomials in ``t`` (force, energy, stiffness) are evaluated here with the C library's ``pow``
+(:func:`mdgran.contact_scalar.pow_ufunc`: numpy's ``**`` would take SIMD code on AVX-512 machines
+and differ there in the last bit) and in the kernel (:mod:`mdgran.contact_scalar`) with products
+(``t*t*t``): the two differ in the last bit for about a quarter of all ``t``, and both the
+reference backend and the force table that the fast backend interpolates are kept bit for bit as
+they were, so those lines exist twice.
 
 The contact energy on the attached branch, ``V(delta) = integral_0^delta f d delta'``, is the
 closed-form polynomial ``P(t) - P(t0)`` with ``P`` the antiderivative of ``f(t) delta'(t)`` and
@@ -49,7 +51,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .contact_scalar import branch_t_ufunc
+from .contact_scalar import branch_t_ufunc, pow_ufunc
 
 #: Contact-law names a scene may use.
 LAWS = ("schwarz", "jkr", "dmt", "hertz")
@@ -300,7 +302,7 @@ class ContactLaw:
             dp = np.maximum(d, 0.0)
             return dp * np.sqrt(dp)
         t = self.t_of_delta(d)
-        u = t**3 - 3.0 * self.sigma
+        u = pow_ufunc()(t, 3.0) - 3.0 * self.sigma
         return self.fc + u * u
 
     def stiffness(self, delta):
@@ -310,11 +312,13 @@ class ContactLaw:
             return 1.5 * np.sqrt(np.maximum(d, 0.0))
         t = self.t_of_delta(d)
         with np.errstate(divide="ignore"):
-            return 6.0 * t * t * (t**3 - 3.0 * self.sigma) / (4.0 * (t**3 - self.sigma))
+            t3 = pow_ufunc()(t, 3.0)
+            return 6.0 * t * t * (t3 - 3.0 * self.sigma) / (4.0 * (t3 - self.sigma))
 
     def _antiderivative(self, t):
         sg, fc = self.sigma, self.fc
-        return (0.4 * t**10 - 4.0 * sg * t**7 + (fc + 15.0 * sg * sg) * t**4
+        pw = pow_ufunc()
+        return (0.4 * pw(t, 10.0) - 4.0 * sg * pw(t, 7.0) + (fc + 15.0 * sg * sg) * pw(t, 4.0)
                 - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
 
     def energy(self, delta):

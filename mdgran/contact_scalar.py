@@ -167,3 +167,21 @@ def branch_t_ufunc():
         _UFUNCS["branch_t"] = vectorize(["float64(float64, float64, float64, float64)"],
                                         cache=True)(branch_t.py_func).ufunc
     return _UFUNCS["branch_t"]
+
+
+def _libm_pow(x, y):
+    return math.pow(x, y)
+
+
+def pow_ufunc():
+    """``math.pow`` (the C library's ``pow``) as a numpy ufunc ``(x, y) -> x^y``, for the
+    t-polynomials of :mod:`mdgran.contact` and :mod:`mdgran.chain`.  numpy's own ``**`` on
+    arrays takes SIMD code on AVX-512 machines (SVML, not correctly rounded: 5% of ``t**3``
+    differ in the last bit) and the C library elsewhere; the compiled kernels call ``pow``.
+    With this ufunc the oracle's values are the same on every machine, and bitwise the
+    kernels'."""
+    if "pow" not in _UFUNCS:
+        from numba import vectorize
+
+        _UFUNCS["pow"] = vectorize(["float64(float64, float64)"], cache=True)(_libm_pow).ufunc
+    return _UFUNCS["pow"]
