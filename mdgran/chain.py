@@ -15,6 +15,14 @@ closed contact (law force plus unilateral damping ``c * d delta/dt``; zero when 
     x_i'' = F_i - F_(i+1) - k1 x_i - k3 x_i^3
 
 Terms switched off by the scene (``k1 = 0``, ``k3 = 0``, ``damping = 0``) are not evaluated.
+
+**Unlike beads** (``mixture``, :class:`mdgran.mixture.Mixture`): bead ``i`` has mass ``m_i`` and
+substrate factor ``g_i``, contact ``k`` its own law ``F_k`` (in the reference bead's units)::
+
+    m_i x_i'' = F_i - F_(i+1) - g_i (k1 x_i + k3 x_i^3)
+
+Without a mixture every mass is 1 and every contact has ``law`` (the homogeneous chain, whose
+arithmetic is unchanged).
 """
 from __future__ import annotations
 
@@ -25,6 +33,7 @@ import numpy as np
 
 from .contact import ContactLaw
 from .contact_scalar import branch_t_ufunc, pow_ufunc
+from .mixture import Mixture
 
 
 # ---- contact numbering and states: the one place that knows them -----------------------------
@@ -101,10 +110,48 @@ class ChainModel:
     k1: float = 0.0
     k3: float = 0.0
     gap: float = 0.0
+    mixture: Mixture | None = field(default=None, compare=False)
     walls: bool = field(init=False)
 
     def __post_init__(self):
         object.__setattr__(self, "walls", self.boundary == "fixed")
+        mix = self.mixture
+        if mix is not None and (mix.n != self.n or len(mix.fc) != self.n_contacts):
+            raise ValueError(f"mixture: {mix.n} beads and {len(mix.fc)} contacts for a chain "
+                             f"of {self.n} beads and {self.n_contacts} contacts")
+
+    # ---- per-contact laws (the mixture's, else the one law) ---------------------------------
+    @property
+    def mixed(self) -> bool:
+        """True for a chain of unlike beads (a :class:`~mdgran.mixture.Mixture`)."""
+        return self.mixture is not None
+
+    @property
+    def delta_off(self):
+        """Opening threshold: ``law.delta_off``, or an array [n_contacts] for a mixture."""
+        return self.law.delta_off if self.mixture is None else self.mixture.delta_off
+
+    @property
+    def loop_energy(self):
+        """Energy lost per opening: ``law.loop_energy``, or an array [n_contacts]."""
+        return self.law.loop_energy if self.mixture is None else self.mixture.loop_energy
+
+    @property
+    def masses(self) -> np.ndarray:
+        """Bead masses [n] (ones for a homogeneous chain)."""
+        return np.ones(self.n) if self.mixture is None else self.mixture.mass
+
+    def law_force(self, delta, k=None):
+        """Force of closed contacts at ``delta`` (all contacts [..., m], or contacts ``k``)."""
+        if self.mixture is None:
+            return self.law.force(delta)
+        return self.mixture.force(delta, k)
+
+    def contact_law_energy(self, delta, k=None):
+        """Energy of closed contacts at ``delta`` (all contacts, or contacts ``k``)."""
+        if self.mixture is None:
+            return self.law_energy(delta)
+        return self.mixture.energy(delta, k)
 
     # ---- geometry --------------------------------------------------------------------------
     @property
@@ -143,22 +190,29 @@ class ChainModel:
     def contact_forces(self, x, v, closed):
         """Per-contact force (law plus unilateral damping), zero on open contacts."""
         delta = self.compressions(x)
-        f = self.law.force(delta)
+        f = self.law_force(delta)
         if self.damping:
             f = f + self.damping * self.differences(v)
         return np.where(closed, f, 0.0)
 
     def substrate_force(self, x):
         if self.k3:
-            return -(self.k1 + self.k3 * x * x) * x
-        if self.k1:
-            return -self.k1 * x
-        return None
+            s = -(self.k1 + self.k3 * x * x) * x
+        elif self.k1:
+            s = -self.k1 * x
+        else:
+            return None
+        if self.mixture is not None and self.mixture.free_beads:
+            s = self.mixture.substrate * s
+        return s
 
     def acceleration(self, x, v, closed):
         a = self._apply(self.contact_forces(x, v, closed))
         s = self.substrate_force(x)
-        return a if s is None else a + s
+        a = a if s is None else a + s
+        if self.mixture is not None and not self.mixture.uniform_mass:
+            a = a / self.mixture.mass
+        return a
 
     def viscous_power(self, v, closed):
         """Rate of viscous dissipation, ``sum_closed c (d delta/dt)^2``."""
@@ -169,11 +223,13 @@ class ChainModel:
 
     # ---- energy ledger ---------------------------------------------------------------------
     def kinetic_energy(self, v) -> float:
+        if self.mixture is not None:
+            return 0.5 * float(np.dot(self.mixture.mass * v, v))
         return 0.5 * float(np.dot(v, v))
 
     def contact_energy(self, x, closed) -> float:
         delta = self.compressions(x)
-        return float(np.sum(np.where(closed, self.law_energy(delta), 0.0)))
+        return float(np.sum(np.where(closed, self.contact_law_energy(delta), 0.0)))
 
     @cached_property
     def _schwarz_energy_constants(self) -> tuple:
@@ -203,6 +259,8 @@ class ChainModel:
         return (0.4 * pw(t, 10.0) - c7 * pw(t, 7.0) + c4 * pw(t, 4.0) - c1 * t) - a0
 
     def substrate_energy(self, x) -> float:
+        if self.mixture is not None and self.mixture.free_beads:
+            x = x * np.sqrt(self.mixture.substrate)  # g_i is 0 or 1
         e = 0.0
         if self.k1:
             e += 0.5 * self.k1 * float(np.dot(x, x))
@@ -230,11 +288,17 @@ class ChainModel:
         the same order, and the row sums are numpy's (pairwise, per row, as for one state)
         or BLAS's dot product (:func:`row_dots`), as :meth:`ledger`'s ``np.dot`` is."""
         x, v = np.asarray(x, dtype=float), np.asarray(v, dtype=float)
-        kinetic = 0.5 * row_dots(v)
+        mix = self.mixture
+        if mix is None:
+            kinetic = 0.5 * row_dots(v)
+        else:
+            kinetic = 0.5 * np.matmul((mix.mass * v)[:, None, :], v[:, :, None])[:, 0, 0]
         delta = self._block_differences(x)
         if self.gap:
             delta = delta - self.gap
-        contact = np.sum(np.where(closed, self.law_energy(delta), 0.0), axis=1)
+        contact = np.sum(np.where(closed, self.contact_law_energy(delta), 0.0), axis=1)
+        if mix is not None and mix.free_beads:
+            x = x * np.sqrt(mix.substrate)
         substrate = np.zeros(len(x))
         if self.k1:
             substrate = substrate + 0.5 * self.k1 * row_dots(x)
@@ -273,12 +337,69 @@ class ChainModel:
         """Paper's initial state: beads at rest at x = 0 except ``bead`` (1-based); every
         contact closed at ``delta = 0`` (open when the scene has an initial gap).  A backend
         then opens at once any contact that sits on its snap-off point moving outward (the
-        wall contact behind the struck bead, for DMT and Hertz)."""
+        wall contact behind the struck bead, for DMT and Hertz).
+
+        Unlike beads between walls start from the chain's static equilibrium
+        (:meth:`equilibrium`): their contacts' forces at ``delta = 0`` differ, so ``x = 0``
+        is no equilibrium there (the homogeneous chain's uniform tension is).  A free chain
+        starts at ``delta = 0`` as the homogeneous one does."""
+        states = initial_states(self.n, self.walls, self.gap)
+        if not closed:
+            states = np.zeros_like(states)
         x = np.zeros(self.n)
+        if self.mixture is not None and self.walls and states.all():
+            x = self.equilibrium.copy()
         v = np.zeros(self.n)
         v[bead - 1] = velocity
-        states = initial_states(self.n, self.walls, self.gap)
-        return x, v, states if closed else np.zeros_like(states)
+        return x, v, states
+
+    @cached_property
+    def equilibrium(self) -> np.ndarray:
+        """Displacements [n] at which every bead of the closed chain is at rest,
+        ``F_i - F_(i+1) = g_i (k1 x_i + k3 x_i^3)``, by Newton's method from ``x = 0`` with the
+        tridiagonal stiffness matrix, to 4 machine epsilons of the largest contact force.
+        Raises :class:`~mdgran.scene.SceneError` where the closed chain has no equilibrium
+        near ``x = 0`` (a contact would have to open)."""
+        from scipy.linalg import solve_banded
+
+        from .scene import SceneError
+
+        closed = np.ones(self.n_contacts, dtype=bool)
+
+        def net_force(x):
+            """Net force per bead [n], or None where a contact has left its closed branch."""
+            if np.any(self.compressions(x) <= self.delta_off):
+                return None
+            return self.masses * self.acceleration(x, np.zeros(self.n), closed)
+
+        x = np.zeros(self.n)
+        force = net_force(x)
+        for _ in range(50):
+            delta = self.compressions(x)
+            scale = 1.0 + float(np.max(np.abs(self.law_force(delta))))
+            if np.max(np.abs(force)) <= 4.0 * np.finfo(float).eps * scale:
+                return x
+            kc = self.mixture.stiffness(delta)
+            k_left = kc[:-1] if self.walls else np.concatenate([[0.0], kc])
+            k_right = kc[1:] if self.walls else np.concatenate([kc, [0.0]])
+            on_site = self.k1 + 3.0 * self.k3 * x * x
+            if self.mixture.free_beads:
+                on_site = self.mixture.substrate * on_site
+            bands = np.zeros((3, self.n))
+            bands[0, 1:] = k_right[:-1]
+            bands[1] = -(k_left + k_right) - on_site
+            bands[2, :-1] = k_right[:-1]
+            step = solve_banded((1, 1), bands, force)
+            for _ in range(60):  # damped: halve the step until the force decreases
+                trial = net_force(x - step)
+                if trial is not None and np.max(np.abs(trial)) < np.max(np.abs(force)):
+                    break
+                step = 0.5 * step
+            else:
+                break
+            x, force = x - step, trial
+        raise SceneError("beads", "the closed chain of these beads has no static equilibrium "
+                         "near x = 0 (a contact would open); make the beads less unlike")
 
 
 def model_from_scene(scene) -> "ChainModel":
@@ -294,4 +415,5 @@ def model_from_scene(scene) -> "ChainModel":
         k1=float(d["substrate"]["k1"]),
         k3=float(d["substrate"]["k3"]),
         gap=float(d["chain"]["initial_gap"]),
+        mixture=scene.mixture,
     )

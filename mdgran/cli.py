@@ -154,6 +154,8 @@ def scene_info(scene) -> dict:
     })
     if law.kind == "schwarz":
         info["table_error_2001"] = table_error(law, 2001)
+    if scene.mixture is not None:  # unlike beads: the law above is the reference pair's
+        info["mixture"] = scene.mixture.describe()
     sc = scene.scales
     if sc is not None:
         from .units import wire_tension

@@ -52,6 +52,7 @@ import sys
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
 
@@ -86,6 +87,7 @@ LIMITS = {
     "material.w": (1e-6, 1e3),
     "material.density": (1.0, 1e5),
     "material.D0": (1e-12, 1e-6),
+    "beads.spread": (0.0, 0.9),
 }
 
 class Key(NamedTuple):
@@ -102,6 +104,11 @@ class Key(NamedTuple):
 
 
 _FREQ = "(stiffer, the substrate period falls below 6e-3 time units)"
+#: ratios to the reference bead (diameter, density, modulus, adhesion): within 1e3 either way,
+#: so that masses (diameter^3) and the pairs' force and length units stay within 1e9
+_RATIO = "[1e-3, 1e3]"
+#: beads.pattern values (mdgran.mixture.pattern_diameters)
+PATTERNS = ("uniform", "dimer", "tapered", "intruder", "random")
 _MAT = "required in a [material]"
 
 #: section -> key -> :class:`Key`.  The one source of the keys, their defaults, ranges and units
@@ -203,6 +210,46 @@ SCHEMA = {
                   "interfacial contact separation (enters the Maugis parameter only)",
                   f"{D0_DEFAULT!r} (with a material)"),
     },
+    "beads": {
+        "pattern": Key("uniform", PATTERNS, "one of " + ", ".join(repr(x) for x in PATTERNS),
+                       "", "how bead diameters are laid out: 'uniform' (beads.diameter, 1 if "
+                       "not given), 'dimer' (beads 2, 4, ... of diameter beads.ratio), "
+                       "'tapered' (each bead beads.ratio times the one before), 'intruder' "
+                       "(bead beads.index of diameter beads.ratio), 'random' (1 + "
+                       "beads.spread (2U - 1), seeded by beads.seed); docs/mixtures.md"),
+        "diameter": Key(None, "ratios?", f"a number or a list of chain.n numbers in {_RATIO}",
+                        "d0", "diameter of each bead over the reference bead's (pattern "
+                        "'uniform')", "1"),
+        "ratio": Key(None, "ratio?", f"a number in {_RATIO}", "-",
+                     "pattern's diameter ratio: dimer's second bead, tapered's d_(i+1)/d_i, "
+                     "the intruder's d/d0", "needed by dimer, tapered, intruder"),
+        "index": Key(None, "int>=1?", "an integer from 1 to chain.n", "",
+                     "the intruder's bead (1-based)", "the middle bead"),
+        "spread": Key(None, "float>=0?", "a number in [0, 0.9]", "",
+                      "pattern 'random': diameters 1 + spread (2U - 1)", "0"),
+        "seed": Key(None, "int>=0?", "an integer >= 0", "",
+                    "pattern 'random': the generator's seed", "0"),
+        "density": Key(1.0, "ratios", f"a number or a list of chain.n numbers in {_RATIO}",
+                       "rho0", "density of each bead over the reference bead's (mass "
+                       "m_i = density_i diameter_i^3)"),
+        "modulus": Key(1.0, "ratios", f"a number or a list of chain.n numbers in {_RATIO}",
+                       "K0", "contact modulus K of two beads of each bead's material, over the "
+                       "reference pair's (a pair's K is the harmonic mean)"),
+        "adhesion": Key(1.0, "ratios", f"a number or a list of chain.n numbers in {_RATIO}",
+                        "w0", "work of adhesion of two of each bead's surfaces over the "
+                        "reference pair's (a pair's w is the geometric mean)"),
+        "pair_adhesion": Key(None, "ratio?", f"a number in {_RATIO}", "w0",
+                             "one work of adhesion for every pair, instead of the means of "
+                             "beads.adhesion", "from beads.adhesion"),
+    },
+    "striker": {
+        "diameter": Key(None, "ratio?", f"a number in {_RATIO}", "d0",
+                        "a striker: bead 1 becomes a free bead (off the substrate) of this "
+                        "diameter, launched by the impulse into the chain (needs "
+                        "chain.boundary = 'free' and impulse.bead = 1)", "no striker"),
+        "density": Key(None, "ratio?", f"a number in {_RATIO}", "rho0",
+                       "the striker's density over the reference bead's", "1 (with a striker)"),
+    },
     "meta": {
         "description": Key("", "str", "a string", "", "what the scene is; first line is listed "
                            "by mdgran scenes"),
@@ -243,9 +290,13 @@ def _check_value(key: str, value, kind, allowed: str):
                 value = int(value)
             else:
                 raise SceneError(key, f"must be {allowed}, not {value!r}")
-        if value < (0 if kind == "int>=0" else 1):
+        if value < (0 if kind.rstrip("?") == "int>=0" else 1):
             raise SceneError(key, f"must be {allowed}, not {value}")
         return value
+    if kind.rstrip("?") == "ratios" and isinstance(value, list):
+        if not value:
+            raise SceneError(key, f"must be {allowed}, not an empty list")
+        return [_check_value(key, v, "ratio", allowed) for v in value]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(key, f"must be {allowed}, not {value!r}")
     value = float(value)
@@ -258,7 +309,8 @@ def _check_value(key: str, value, kind, allowed: str):
     bad = ((base == "float>=0" and value < 0) or (base == "float>0" and value <= 0)
            or (base == "fc" and not -2.0 <= value <= -1.5)
            or (base == "tol" and not 1e-14 <= value <= 1e-3)
-           or (base == "nu" and not 0.0 <= value < 0.5))
+           or (base == "nu" and not 0.0 <= value < 0.5)
+           or (base in ("ratio", "ratios") and not 1e-3 <= value <= 1e3))
     lo, hi = LIMITS.get(key, (-math.inf, math.inf))
     if bad or not lo <= value <= hi:
         raise SceneError(key, f"must be {allowed}, not {value}")
@@ -329,9 +381,22 @@ class Scene:
         mat = self.data.get("material", {})
         return scales_from_material(mat, fill=None) if mat.get("diameter") is not None else None
 
+    @cached_property
+    def mixture(self):
+        """The chain's unlike beads (:class:`mdgran.mixture.Mixture`, from ``[beads]`` and
+        ``[striker]``), or ``None`` for the homogeneous chain."""
+        from .mixture import mixture_from_scene
+
+        return mixture_from_scene(self)
+
     @property
     def impulse_energy(self) -> float:
-        return 0.5 * float(self.data["impulse"]["velocity"]) ** 2
+        """``E_imp = m_b v0^2 / 2`` (units eta p), ``m_b`` the struck bead's mass (1 but in a
+        chain of unlike beads)."""
+        v0 = float(self.data["impulse"]["velocity"])
+        mix = self.mixture
+        m = 1.0 if mix is None else float(mix.mass[int(self.data["impulse"]["bead"]) - 1])
+        return 0.5 * m * v0**2
 
     def with_overrides(self, overrides) -> "Scene":
         """This scene with ``(key, value)`` overrides: the same keys and rules as
@@ -459,10 +524,56 @@ def _resolve(raw: dict):
         raise SceneError("run.output_interval", f"must be at most run.duration = {r['duration']}")
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
+    _check_beads(data, raw)
     if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
         raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
                          "per-bead or per-contact series); give a stride >= 1 to store them")
     return data, sources
+
+
+#: beads.* keys each pattern uses besides the per-bead ratios (a key given that the pattern
+#: does not use is refused: it would have no effect)
+PATTERN_KEYS = {"uniform": ("diameter",), "dimer": ("ratio",), "tapered": ("ratio",),
+                "intruder": ("ratio", "index"), "random": ("spread", "seed")}
+
+
+def _check_beads(data: dict, raw: dict):
+    """[beads] and [striker] agree with the chain: lists of chain.n values, the keys the
+    pattern needs and no key it ignores, a striker only at the free end bead 1."""
+    b, n = data["beads"], data["chain"]["n"]
+    given = raw.get("beads", {})
+    used = PATTERN_KEYS[b["pattern"]]
+    for name in ("diameter", "ratio", "index", "spread", "seed"):
+        if name in given and name not in used:
+            raise SceneError(f"beads.{name}", f"not used by beads.pattern = {b['pattern']!r} "
+                             "(used: " + ", ".join(f"beads.{k}" for k in used) + ")")
+    if "ratio" in used and b["ratio"] is None:
+        raise SceneError("beads.ratio", f"needed by beads.pattern = {b['pattern']!r}: "
+                         f"{SCHEMA['beads']['ratio'].allowed}")
+    if b["pattern"] == "tapered" and not 1e-3 <= b["ratio"] ** (n - 1) <= 1e3:
+        raise SceneError("beads.ratio", f"{b['ratio']:g}^(chain.n - 1) = "
+                         f"{b['ratio'] ** (n - 1):.3g}: the last bead's diameter must stay in "
+                         f"{_RATIO} (a ratio closer to 1, or fewer beads)")
+    if b["index"] is not None and b["index"] > n:
+        raise SceneError("beads.index", f"must be an integer from 1 to chain.n = {n}, "
+                         f"not {b['index']}")
+    for name in ("diameter", "density", "modulus", "adhesion"):
+        if isinstance(b[name], list) and len(b[name]) != n:
+            raise SceneError(f"beads.{name}", f"a list must give chain.n = {n} values, not "
+                             f"{len(b[name])}")
+    if data["striker"]["diameter"] is None:
+        if data["striker"]["density"] is not None:
+            raise SceneError("striker.density", "refines a striker and needs "
+                             "striker.diameter")
+        return
+    if data["striker"]["density"] is None:
+        data["striker"]["density"] = 1.0
+    if data["chain"]["boundary"] != "free":
+        raise SceneError("striker.diameter", "a striker needs chain.boundary = 'free' (bead 1 "
+                         "would start stuck to the wall)")
+    if data["impulse"]["bead"] != 1:
+        raise SceneError("impulse.bead", "must be 1 with a striker (the striker is bead 1, "
+                         f"launched at impulse.velocity), not {data['impulse']['bead']}")
 
 
 def _check_material(data: dict, raw: dict, sources: dict):
@@ -600,6 +711,8 @@ def describe(spec: str) -> str:
 
 
 def _toml_value(v) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float)):
@@ -649,7 +762,8 @@ def _range_text(sec: str, name: str, kind) -> str:
         if base == "float" and lim[0] == -lim[1]:
             return f"\\|v\\| <= {_num(lim[1])}"
         return f"[{_num(lim[0])}, {_num(lim[1])}]"
-    return {"int>=1": ">= 1" if f"{sec}.{name}" != "impulse.bead" else "1 to chain.n",
+    return {"int>=1": ">= 1" if f"{sec}.{name}" not in ("impulse.bead", "beads.index")
+            else "1 to chain.n", "ratio": _RATIO, "ratios": _RATIO + ", or a list of chain.n",
             "int>=0": ">= 0", "float>=0": ">= 0", "float>0": "> 0", "float": "finite",
             "fc": "[-2, -1.5]", "tol": "[1e-14, 1e-3]", "nu": "[0, 0.5)", "bool": "true, false",
             "str": "any string"}[base]

@@ -109,6 +109,9 @@ class Backend:
     #: every option the backend's constructor takes (``run(scene, name, **options)``); others
     #: are rejected.  The default is the reference's: its adaptive ``tolerance``.
     accepted_options: tuple = ("tolerance",)
+    #: True for a backend that runs chains of unlike beads (``[beads]``, ``[striker]``: a
+    #: :class:`~mdgran.mixture.Mixture`); the others refuse such a scene before running
+    runs_mixtures: bool = False
 
     def __init__(self, scene, **options):
         from ..chain import model_from_scene
@@ -120,6 +123,13 @@ class Backend:
                              + (", ".join(self.accepted_options) or "none"))
         self.scene = scene
         self.model = model_from_scene(scene)
+        if self.model.mixed and not self.runs_mixtures:
+            key = "striker.diameter" if scene.data["striker"]["diameter"] is not None \
+                else "beads"
+            raise SceneError(key, f"backend {self.name!r} does not run chains of unlike beads "
+                             "([beads], [striker]) yet; the reference backend does")
+        if self.model.mixed:  # refused here, before a run, if the chain has no equilibrium
+            self.model.initial_state(1, 0.0)
         self.options = options
         self.stats: dict = {}
 
@@ -152,7 +162,7 @@ class Backend:
         m = self.model
         if m.law.kind == "hertz":
             return scale
-        return scale + m.n_contacts * max(float(m.law.loop_energy), 1.0)
+        return scale + m.n_contacts * max(float(np.max(m.loop_energy)), 1.0)
 
     def ledger_roundoff(self, scale: float, term_max: float) -> float:
         """Round-off floor, relative to ``scale``: ``LEDGER_ROUNDOFF * eps * (M + N_c) /

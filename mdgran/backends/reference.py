@@ -119,14 +119,15 @@ class ReferenceBackend(Backend):
     """Event-driven DOP853 integration at ``run.tolerance``; the accuracy oracle."""
 
     name = "reference"
+    runs_mixtures = True
 
     def __init__(self, scene, **options):
         super().__init__(scene, **options)
         self.tol = float(options.get("tolerance", scene.data["run"]["tolerance"]))
         m = self.model
         self.n = m.n
-        self.delta_off = m.law.delta_off
-        law = m.law
+        self.delta_off = m.delta_off  # a number, or per contact for unlike beads
+        law = m.law  # kind, snap-off rule and (lambda = 0) DMT are every pair's
         if law.kind == "hertz" or law.fc == -2.0:
             self._singular = "both"  # f - f(0) ~ delta^(3/2) at delta = 0
         elif law.snap_off == "displacement":
@@ -236,7 +237,7 @@ class ReferenceBackend(Backend):
         delta = m.compressions(y[:self.n])
         for k in ks:
             if self._closed[k]:
-                self._d_hyst += float(m.law.energy(delta[k]))
+                self._d_hyst += float(m.contact_law_energy(delta[k], k))
                 self._closed[k] = False
                 events.append(Event(t, int(nums[k]), OPEN))
             else:

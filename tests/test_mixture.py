@@ -1,0 +1,271 @@
+"""Chains of unlike beads ([beads], [striker]; mdgran.mixture): each pair's law, the start from
+equilibrium, and runs of the reference backend against analytic results: the restitution of an
+unlike pair, a striker's elastic collision, the modes of a dimer chain, a light intruder's
+localized mode.  The expected values are computed here from the paper's formulas and the
+homogeneous law (contact.ContactLaw), not from mdgran.mixture."""
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from mdgran import run
+from mdgran.chain import model_from_scene
+from mdgran.contact import ContactLaw, fc_from_lambda
+from mdgran.scene import SceneError, load_scene
+
+from conftest import make_scene
+
+LAM = 0.64
+
+
+def pair_by_hand(s1, s2, k1, k2, a1, a2, lam=LAM):
+    """``(A, L, law)`` of the pair (paper Eq. 4 and the module doc's scaling), own-units law."""
+    R = 2 * s1 * s2 / (s1 + s2)
+    K = 2 * k1 * k2 / (k1 + k2)
+    w = math.sqrt(a1 * a2)
+    L = (R * w * w / (K * K)) ** (1 / 3)
+    return R * w, L, ContactLaw("schwarz", fc_from_lambda(lam * L, "cos"), "displacement")
+
+
+ratio = st.floats(0.3, 3.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(s=st.lists(ratio, min_size=3, max_size=3), k=st.lists(ratio, min_size=3, max_size=3),
+       a=st.lists(ratio, min_size=3, max_size=3), u=st.floats(-0.2, 3.0))
+def test_each_contact_has_its_pairs_law(s, k, a, u):
+    """Contact k of a free 3-bead chain has ``F = A f(delta / L)`` and ``V = A L V(delta / L)``
+    of its pair, and its energy's derivative is its force (central difference)."""
+    sc = make_scene(chain={"n": 3, "boundary": "free"},
+                    beads={"diameter": s, "modulus": k, "adhesion": a})
+    m = model_from_scene(sc)
+    for c in range(2):
+        A, L, law = pair_by_hand(s[c], s[c + 1], k[c], k[c + 1], a[c], a[c + 1])
+        d = max(u * L, 0.9 * law.delta_off * L)
+        assert m.delta_off[c] == pytest.approx(L * law.delta_off, rel=1e-12)
+        assert m.loop_energy[c] == pytest.approx(A * L * law.loop_energy, rel=1e-12)
+        assert m.law_force(np.array([d]), [c])[0] == pytest.approx(A * law.force(d / L),
+                                                                   rel=1e-11, abs=1e-12)
+        e = m.contact_law_energy(np.array([d]), [c])[0]
+        assert e == pytest.approx(A * L * law.energy(d / L), rel=1e-10, abs=1e-12)
+        h = 1e-6 * L
+        dv = (m.contact_law_energy(np.array([d + h]), [c])[0]
+              - m.contact_law_energy(np.array([d - h]), [c])[0]) / (2 * h)
+        assert dv == pytest.approx(m.law_force(np.array([d]), [c])[0], rel=1e-5, abs=1e-7)
+
+
+def test_hertz_pair_is_the_hertz_law_of_the_pair():
+    """Hertz: ``F = (K_ij/K0) sqrt(R_ij/R0) delta^(3/2)`` (w cancels)."""
+    sc = make_scene(chain={"n": 2, "boundary": "free"}, contact={"law": "hertz"},
+                    beads={"diameter": [1.0, 0.5], "modulus": [1.0, 2.0], "adhesion": 7.0})
+    m = model_from_scene(sc)
+    R, K = 2 * 0.5 / 1.5, 2 * 2.0 / 3.0
+    assert m.law_force(np.array([0.3]))[0] == pytest.approx(K * math.sqrt(R) * 0.3**1.5,
+                                                            rel=1e-14)
+
+
+def test_reference_beads_are_the_homogeneous_chain():
+    """Ratios 1 everywhere make no mixture: the homogeneous chain, computed as before."""
+    sc = load_scene("micro-star", [("beads.diameter", 1.0), ("beads.density", [1.0] * 20)])
+    assert sc.mixture is None and model_from_scene(sc).mixed is False
+
+
+@pytest.mark.parametrize("overrides, key", [
+    ([("beads.pattern", "dimer")], "beads.ratio"),
+    ([("beads.diameter", [1.0, 2.0])], "beads.diameter"),
+    ([("beads.ratio", 2.0)], "beads.ratio"),
+    ([("beads.density", 0.0)], "beads.density"),
+    ([("beads.density", [])], "beads.density"),
+    ([("beads.pattern", "tapered"), ("beads.ratio", 2.0)], "beads.ratio"),
+    ([("beads.pattern", "intruder"), ("beads.ratio", 0.5), ("beads.index", 21)], "beads.index"),
+    ([("beads.pattern", "random"), ("beads.spread", 0.95)], "beads.spread"),
+    ([("striker.diameter", 2.0)], "striker.diameter"),
+    ([("chain.boundary", "free"), ("striker.diameter", 2.0), ("impulse.bead", 2)],
+     "impulse.bead"),
+    ([("striker.density", 2.0)], "striker.density"),
+])
+def test_bad_bead_input_names_the_key(overrides, key):
+    with pytest.raises(SceneError) as err:
+        load_scene("micro-star", overrides)
+    assert err.value.key == key and "\n" not in str(err.value)
+
+
+def test_patterns_lay_out_the_diameters():
+    """Masses m_i = density_i d_i^3 of each pattern."""
+    def masses(*overrides):
+        return model_from_scene(load_scene("micro-star", [("chain.n", 5), *overrides])).masses
+
+    assert masses(("beads.pattern", "dimer"), ("beads.ratio", 0.5)) == pytest.approx(
+        [1, 0.125, 1, 0.125, 1])
+    assert masses(("beads.pattern", "tapered"), ("beads.ratio", 0.9)) == pytest.approx(
+        0.9 ** (3 * np.arange(5)))
+    assert masses(("beads.pattern", "intruder"), ("beads.ratio", 0.5)) == pytest.approx(
+        [1, 1, 0.125, 1, 1])
+    r = masses(("beads.pattern", "random"), ("beads.spread", 0.2), ("beads.seed", 3))
+    d = 1 + 0.2 * (2 * np.random.default_rng(3).random(5) - 1)
+    assert r == pytest.approx(d**3)
+
+
+def test_only_the_reference_backend_runs_unlike_beads(tmp_path):
+    """fast and LAMMPS refuse a mixed chain before running: exit 2, one line, the key."""
+    proc = subprocess.run([sys.executable, "-m", "mdgran", "run", "micro-star", "--backend",
+                           "fast", "--out", str(tmp_path / "x.h5"), "--set",
+                           "beads.pattern=dimer", "--set", "beads.ratio=0.8", "--set",
+                           "chain.n=21"], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "beads" in proc.stderr
+    assert not (tmp_path / "x.h5").exists()
+
+
+# ---- against analytic results --------------------------------------------------------------
+def test_unlike_pair_restitution():
+    """Two free unlike beads, bead 1 at v0: after the contact opens once, the relative kinetic
+    energy is ``mu v0^2 / 2`` less the pair's own loop energy ``A L W(fc_pair)``, with the reduced
+    mass ``mu``; momentum is conserved."""
+    s, rho, k, a, v0 = [1.0, 0.6], [1.0, 2.0], [1.0, 0.5], [1.0, 1.5], 3.0
+    sc = make_scene(chain={"n": 2, "boundary": "free"}, contact={"damping": 0.0},
+                    substrate={"k1": 0.0}, impulse={"velocity": v0},
+                    beads={"diameter": s, "density": rho, "modulus": k, "adhesion": a},
+                    run={"duration": 20.0, "output_interval": 1.0, "tolerance": 1e-11})
+    res = run(sc, "reference")
+    tr = res.trajectory
+    A, L, law = pair_by_hand(*s, *k, *a)
+    m1, m2 = rho[0] * s[0] ** 3, rho[1] * s[1] ** 3
+    mu = m1 * m2 / (m1 + m2)
+    w_pair = A * L * law.loop_energy
+    assert list(tr.ev_kind) == [0]  # one snap-off
+    assert tr.ledger["dissipated_hysteresis"][-1] == pytest.approx(w_pair, rel=1e-10)
+    v_rel = tr.v[-1, 1] - tr.v[-1, 0]
+    assert v_rel == pytest.approx(math.sqrt(v0**2 - 2 * w_pair / mu), rel=1e-8)
+    assert m1 * tr.v[-1, 0] + m2 * tr.v[-1, 1] == pytest.approx(m1 * v0, rel=1e-12)
+    assert res.max_ledger_error < 1e-9
+
+
+@pytest.mark.parametrize("d_striker, density", [(1.5, 1.0), (0.7, 2.5)])
+def test_striker_on_free_hertz_pair_is_an_elastic_collision(d_striker, density):
+    """A striker (bead 1, off the substrate) hits a free Hertz bead: velocities after are those
+    of the 1-D elastic collision, ``v1 = (m1 - m2) v0 / (m1 + m2)``, ``v2 = 2 m1 v0 / (m1 +
+    m2)``, with the striker's mass ``m1 = density d^3``."""
+    v0 = 2.0
+    sc = make_scene(chain={"n": 2, "boundary": "free"}, contact={"law": "hertz", "damping": 0.0},
+                    substrate={"k1": 0.0}, impulse={"velocity": v0},
+                    striker={"diameter": d_striker, "density": density},
+                    run={"duration": 30.0, "output_interval": 1.0, "tolerance": 1e-11})
+    tr = run(sc, "reference").trajectory
+    m1, m2 = density * d_striker**3, 1.0
+    assert tr.v[-1, 0] == pytest.approx((m1 - m2) / (m1 + m2) * v0, rel=1e-8, abs=1e-9)
+    assert tr.v[-1, 1] == pytest.approx(2 * m1 / (m1 + m2) * v0, rel=1e-8)
+    assert sc.impulse_energy == pytest.approx(0.5 * m1 * v0**2)
+    assert tr.ledger["kinetic_energy"][-1] == pytest.approx(0.5 * m1 * v0**2, rel=1e-9)
+
+
+def linear_modes(masses, k_contacts, k1):
+    """Frequencies and mass-normalised shapes of a chain between walls with contact stiffnesses
+    ``k_contacts`` [n + 1] and on-site ``k1``: numpy's eigenvalues of ``M^-1/2 K M^-1/2``."""
+    n = len(masses)
+    K = np.diag(k_contacts[:-1] + k_contacts[1:] + k1)
+    K -= np.diag(k_contacts[1:-1], 1) + np.diag(k_contacts[1:-1], -1)
+    s = 1 / np.sqrt(masses)
+    w2, y = np.linalg.eigh(s[:, None] * K * s[None, :])
+    return np.sqrt(w2), s[:, None] * y  # x = sum_j phi_j q_j, phi_j^T M phi_k = delta_jk
+
+
+def test_dimer_chain_modes_acoustic_and_optical():
+    """A dimer of masses 1 and 3 on identical springs ``k = f'(0)`` between walls: numpy's
+    eigenfrequencies fill the acoustic and optical bands of the infinite dimer chain on the
+    substrate, ``(2k + k1 - m1 w^2)(2k + k1 - m2 w^2) = 4 k^2 cos^2(q/2)``, none in the gap; and
+    a small-impulse run follows each mode's linear motion ``q_j(t) = (phi_j^T M v0) sin(w_j t)
+    / w_j``."""
+    n, m_heavy, k1, v0 = 21, 3.0, 0.05, 1e-6
+    sc = make_scene(chain={"n": n}, contact={"damping": 0.0}, substrate={"k1": k1},
+                    impulse={"velocity": v0, "bead": 11},
+                    beads={"density": [1.0, m_heavy] * 10 + [1.0]},
+                    run={"duration": 60.0, "output_interval": 0.25, "tolerance": 1e-12})
+    k = ContactLaw("schwarz", fc_from_lambda(LAM, "cos")).stiffness(0.0)
+    masses = np.array([1.0, m_heavy] * 10 + [1.0])
+    omega, phi = linear_modes(masses, np.full(n + 1, k), k1)
+    # bands: each branch runs from its q = 0 value to its q = pi value
+    b, c = 2 * k + k1, (2 * k + k1) ** 2 - 4 * k * k
+    root = np.sqrt((b * (1 + m_heavy)) ** 2 - 4 * m_heavy * c)
+    ac = (math.sqrt((b * (1 + m_heavy) - root) / (2 * m_heavy)), math.sqrt(b / m_heavy))
+    op = (math.sqrt(b / 1.0), math.sqrt((b * (1 + m_heavy) + root) / (2 * m_heavy)))
+    acoustic = omega[omega <= ac[1] * (1 + 1e-12)]
+    optical = omega[omega >= op[0] * (1 - 1e-12)]
+    assert len(acoustic) + len(optical) == n and len(acoustic) == 10 and len(optical) == 11
+    assert acoustic.min() >= ac[0] and optical.max() <= op[1] * (1 + 1e-12)
+
+    tr = run(sc, "reference").trajectory
+    assert len(tr.ev_time) == 0
+    q_sim = tr.x @ (masses[:, None] * phi)  # [frames, modes]
+    amp = (phi.T @ (masses * tr.v[0])) / omega
+    q_lin = np.sin(np.outer(tr.time, omega)) * amp
+    excited = np.abs(amp) > 1e-3 * np.abs(amp).max()
+    err = np.abs(q_sim - q_lin)[:, excited].max(axis=0) / np.abs(amp[excited])
+    assert excited.sum() >= 10 and err.max() < 1e-4
+
+
+def test_light_intruder_has_a_localized_mode_above_the_band():
+    """A light intruder (mass m' = 0.3) in a chain of unit masses on springs ``k``: the mode
+    above the band has Montroll and Potts's frequency ``w^2 = k (1 + u)^2 / u``, ``u = m' /
+    (2 - m')`` its decay per bead; numpy's top eigenvalue has it, and the intruder of a run
+    struck there oscillates at it (spectral peak)."""
+    n, mi = 41, 0.3
+    density = [1.0] * n
+    density[20] = mi
+    k = ContactLaw("schwarz", fc_from_lambda(LAM, "cos")).stiffness(0.0)
+    u = mi / (2 - mi)
+    w_loc = math.sqrt(k * (1 + u) ** 2 / u)
+    omega, phi = linear_modes(np.array(density), np.full(n + 1, k), 0.0)
+    assert omega[-1] == pytest.approx(w_loc, rel=1e-9)
+    assert omega[-2] < 2 * math.sqrt(k)  # the rest stay in the band
+    shape = np.abs(phi[:, -1])
+    assert shape[22] / shape[21] == pytest.approx(u, rel=1e-6)  # decays by u per bead
+
+    sc = make_scene(chain={"n": n}, contact={"damping": 0.0}, substrate={"k1": 0.0},
+                    impulse={"velocity": 1e-6, "bead": 21}, beads={"density": density},
+                    run={"duration": 200.0, "output_interval": 0.05, "tolerance": 1e-12})
+    tr = run(sc, "reference").trajectory
+    x = tr.x[:, 20] * np.hanning(len(tr.time))
+    spec = np.abs(np.fft.rfft(x, 16 * len(x)))
+    freqs = 2 * np.pi * np.fft.rfftfreq(16 * len(x), tr.time[1] - tr.time[0])
+    assert freqs[np.argmax(spec)] == pytest.approx(w_loc, rel=2e-3)
+
+
+def test_diameter_dimer_starts_from_its_equilibrium():
+    """Between walls the pairs' forces at delta = 0 differ, so the chain starts from its static
+    equilibrium: zero net force on every bead by each pair's own law, and with no impulse it
+    stays at rest (no event, displacements within 1e-9 p)."""
+    sc = load_scene("micro-star", [("beads.pattern", "dimer"), ("beads.ratio", 0.7),
+                                   ("chain.n", 21), ("impulse.velocity", 0.0),
+                                   ("run.duration", 20.0), ("run.tolerance", 1e-11)])
+    m = model_from_scene(sc)
+    x = m.equilibrium
+    delta = m.compressions(x)
+    s = [1.0, 0.7] * 10 + [1.0]
+    s = [s[0]] + s + [s[-1]]  # walls: mirror beads
+    f = np.array([A * law.force(d / L) for d, (A, L, law) in
+                  zip(delta, (pair_by_hand(s[i], s[i + 1], 1, 1, 1, 1) for i in range(22)))])
+    net = f[:-1] - f[1:] - m.k1 * x
+    assert np.abs(x).max() > 0.1 and np.abs(net).max() < 1e-13
+    tr = run(sc, "reference").trajectory
+    assert len(tr.ev_time) == 0 and np.abs(tr.x - x).max() < 1e-9
+
+
+@settings(max_examples=12, deadline=None)
+@given(s=st.lists(st.floats(0.6, 1.6), min_size=6, max_size=6),
+       rho=st.lists(st.floats(0.3, 3.0), min_size=6, max_size=6),
+       v0=st.floats(0.5, 6.0))
+def test_random_free_mixtures_conserve_momentum_and_close_the_ledger(s, rho, v0):
+    """Free chains of random unlike beads with no substrate: total momentum stays ``m_1 v0``
+    and the energy ledger closes within the reference's bound, whatever the events."""
+    sc = make_scene(chain={"n": 6, "boundary": "free"}, substrate={"k1": 0.0},
+                    impulse={"velocity": v0}, beads={"diameter": s, "density": rho},
+                    run={"duration": 30.0, "output_interval": 1.0, "tolerance": 1e-10})
+    res = run(sc, "reference")
+    m = np.array(rho) * np.array(s) ** 3
+    p = res.trajectory.v @ m
+    assert np.abs(p - m[0] * v0).max() < 1e-9 * (1 + m[0] * v0)
+    assert res.status == "complete"
