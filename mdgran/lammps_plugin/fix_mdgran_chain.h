@@ -84,7 +84,6 @@ class FixMdgranChain : public Fix {
   double *u, *w;                            // displacement, velocity estimate
   int *left;                                // local index of the left neighbour (-1: none)
   double *fkick;                            // located: kick force of the contact to the right
-  double *anew, *akick;                     // located: acceleration and kick at the pass end
   int nmax_scratch;
   void ensure_scratch();
 
@@ -117,6 +116,9 @@ class FixMdgranChain : public Fix {
   std::vector<int> flagged;                 // indices into cons: a possible event in the pass
   std::vector<double> roots;                // their first roots
   std::vector<int> switching;               // indices into cons: switch at the event
+  std::vector<int> runs;                    // located: owned atoms it moves, [begin, end) pairs
+  std::vector<int> still;                   // the other owned atoms (walls, outside the group)
+  std::vector<int> wall_atoms;              // walls among the owned and ghost atoms
   void build_contacts();
   int contacts_stale;                       // cons and left[] need rebuilding (re-neighboured)
   // f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free
@@ -127,7 +129,7 @@ class FixMdgranChain : public Fix {
   }
   double located_pass(double h);
   void drift(double h, int start);
-  void kick(double h, int last);
+  void accelerate(double h, int last);
   void located_step();
   void located_setup();
   double first_root(const Con &c, double h) const;
@@ -140,6 +142,8 @@ class FixMdgranChain : public Fix {
   inline double vstart(int i) const;         // velocity at the substep start (walls: 0)
   inline double astart(int i) const;         // acceleration at the substep start (walls: 0)
   inline int moves(int i) const;             // in the fix group and not a wall
+  // first element of a LAMMPS per-atom array of rows (x, v, f: one block, 3 per atom)
+  static double *flat(double **a) { return a ? a[0] : nullptr; }
 
   double t_of_delta(double delta) const;
   double antiderivative(double t) const;
