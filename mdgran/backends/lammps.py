@@ -315,6 +315,7 @@ class LammpsBackend(Backend):
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0
+        self._list_key = None  # (nlocal, nall, nmax, nbuild) of the kept contact list
         self._power_prev = 0.0
         self._part = np.zeros(2)  # D_hysteresis, D_viscous of this rank since the last sync
         self._events_part = []  # (step, left tag, kind, time) of this rank since the last sync
@@ -364,16 +365,27 @@ class LammpsBackend(Backend):
         nmax = lmp.extract_setting("nmax")
         self._buffers(nmax)
         tag, x, v, x0, closed, dprev, aprev = self._views.atoms(nmax, nall)
-        kernel.build_map(tag, nall, self._tmap)
+        new_step = step != self._last_step
+        # the map and the contact list, kept while the atoms' local indices hold: until LAMMPS
+        # re-neighbours (its count of neighbour-list builds, thermo keyword nbuild, moves) or
+        # sets up a run (a call for the step already done; the count restarts at 0 there)
+        key = (nlocal, nall, nmax, self.lmp.get_thermo("nbuild"))
+        if not new_step or key != self._list_key:
+            self._list = kernel.contact_list(tag, nlocal, nall, closed, self._tmap, self._ipar,
+                                             self._left, self._fcon, self._pairs)
+            self._list_key = key
         if self._mpi is not None:  # collective: every rank, every call
             self._share_aprev(tag, nlocal, nall, aprev)
-        new_step = step != self._last_step
+        npair, nown, missing = self._list
         if self._error is None:
             try:
+                if missing >= 0:
+                    raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
+                                             step)
                 nev, power, err, where, value = kernel.contact_step(
-                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap, self._coef,
-                    self._par, self._ipar, step, new_step, self._last_step is not None, self._u,
-                    self._w, self._fcon, self._left, self._pairs, self._ev)
+                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._coef, self._par,
+                    self._ipar, step, new_step, self._last_step is not None, self._u, self._w,
+                    self._fcon, self._left, self._pairs, npair, nown, self._ev)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:

@@ -343,25 +343,38 @@ def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
 
 
 @njit(cache=True)
-def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
-                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, events):
+def contact_list(tag, nlocal, nall, closed, tmap, ipar, left, fcon, pairs):
+    """The map and the contact list of :func:`contact_step`, made anew only when LAMMPS has
+    re-neighboured (atoms migrated or re-sorted, ghosts made anew: local indices change) or
+    set up a run, and kept in between (rebuilt at every step they cost ~15% of the hook's
+    step): ``tmap[tag] = local index`` (:func:`build_map`), the ``(left, right)`` local indices
+    of the contacts this rank evaluates in ``pairs`` with the left neighbour of each owned atom
+    in ``left`` (:func:`_list_contacts`), and ``fcon`` zeroed where no contact writes it.
+    Returns ``(count, owned count, i)``: ``i >= 0`` is an owned atom whose closed contact's
+    partner is beyond the ghost cut-off (an error; states change only in a contact's
+    evaluation, so a contact not listed keeps its state until the next rebuild)."""
+    build_map(tag, nall, tmap)
+    return _list_contacts(tag, nlocal, nall, closed, tmap, ipar[I_NTAGS], left, fcon, pairs)
+
+
+@njit(cache=True)
+def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, coef, par, ipar,
+                 step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events):
     """Forces of the contacts on this rank's atoms into ``fext`` (x column; y, z zeroed) and,
     at a new step, state switches, ``aprev`` of owned atoms and this rank's events.
 
-    ``tmap`` must hold the current atoms (:func:`build_map`); ``u, w, fcon`` (``>= nall``),
-    ``left`` (``>= nlocal``), ``pairs`` (``>= nall`` rows of 2) are scratch; ``events``
-    (``>= nlocal`` rows) receives ``[local index of the left atom, kind (1 close, 0 open), time,
-    energy lost]``.  Returns ``(number of events, damping power c sum rate^2 over this rank's
-    contacts, error code, its local index, its value)``.
+    ``pairs[:npair]`` (the first ``nown`` of them this rank's own), ``left`` and the zeros of
+    ``fcon`` are those :func:`contact_list` made for the current atoms; ``u, w, fcon``
+    (``>= nall``) are scratch; ``events`` (``>= nlocal`` rows) receives ``[local index of the
+    left atom, kind (1 close, 0 open), time, energy lost]``.  Returns ``(number of events,
+    damping power c sum rate^2 over this rank's contacts, error code, its local index, its
+    value)``.
 
-    Four passes, each a function the compiler inlines (``inline="always"``): a call it does not
-    inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns per
-    contact, three times the contact's own work; only an event calls out (:func:`_record`)."""
+    Three passes, each a function the compiler inlines (``inline="always"``): a call it does
+    not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
+    per contact, three times the contact's own work; only an event calls out
+    (:func:`_record`)."""
     _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, u, w)
-    npair, nown, missing = _list_contacts(tag, nlocal, nall, closed, tmap, ipar[I_NTAGS], left,
-                                          fcon, pairs)
-    if missing >= 0:
-        return 0, 0.0, PARTNER_MISSING, missing, 0.0
     nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed, dprev,
                                                      coef, par, ipar, step, new_step,
                                                      have_last, fcon, events)
