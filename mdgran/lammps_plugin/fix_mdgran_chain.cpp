@@ -667,21 +667,23 @@ void FixMdgranChain::drift(double h, int start)
 {
   if (contacts_stale) build_contacts();    // runs and still are those of the current atoms
   double *x = flat(atom->x), *v = flat(atom->v);
+  double *const xs_ = xs, *const vs_ = vs;    // members as locals (see located_pass)
+  const double *const aprev_ = aprev;
   const double hh = 0.5 * h;
   for (size_t r = 0; r < runs.size(); r += 2)
     for (int i = runs[r]; i < runs[r + 1]; i++) {
       if (start) {
-        xs[i] = x[3 * i];
-        vs[i] = v[3 * i];
+        xs_[i] = x[3 * i];
+        vs_[i] = v[3 * i];
       }
-      double vh = vs[i] + hh * aprev[i];
-      x[3 * i] = xs[i] + h * vh;
+      double vh = vs_[i] + hh * aprev_[i];
+      x[3 * i] = xs_[i] + h * vh;
       v[3 * i] = vh;
     }
   if (start)
     for (int i : still) {
-      xs[i] = x[3 * i];
-      vs[i] = v[3 * i];
+      xs_[i] = x[3 * i];
+      vs_[i] = v[3 * i];
     }
 }
 
@@ -693,15 +695,19 @@ void FixMdgranChain::drift(double h, int start)
 void FixMdgranChain::accelerate(double h, int last)
 {
   double *v = flat(atom->v), *f = flat(atom->f);
+  double *const aprev_ = aprev;    // members as locals (see located_pass)
+  const double *const fcon_ = fcon, *const fkick_ = fkick, *const u_ = u;
+  const int *const left_ = left;
+  const double k1_ = k1, k3_ = k3;
   const double hh = 0.5 * h;
   double check = 0.0;
   // a = F_left - F_right - (k1 u + k3 u^3), and av the same with the kick forces
   auto accel = [&](int i, double &a, double &av) {
-    double fl = left[i] >= 0 ? fcon[left[i]] : 0.0;
-    double fvl = left[i] >= 0 ? fkick[left[i]] : 0.0;
-    a = fl - fcon[i];
-    av = fvl - fkick[i];
-    double sub = k1 * u[i] + k3 * u[i] * u[i] * u[i];    // substrate: k1 u + k3 u^3
+    double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
+    double fvl = left_[i] >= 0 ? fkick_[left_[i]] : 0.0;
+    a = fl - fcon_[i];
+    av = fvl - fkick_[i];
+    double sub = k1_ * u_[i] + k3_ * u_[i] * u_[i] * u_[i];    // substrate: k1 u + k3 u^3
     a -= sub;
     av -= sub;
     check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
@@ -710,7 +716,7 @@ void FixMdgranChain::accelerate(double h, int last)
     for (int i = runs[r]; i < runs[r + 1]; i++) {
       double a, av;
       accel(i, a, av);
-      aprev[i] = a;
+      aprev_[i] = a;
       v[3 * i] = v[3 * i] + hh * av;
       if (last) f[3 * i] += a;
     }
@@ -741,35 +747,48 @@ double FixMdgranChain::located_pass(double h)
   tagint *tag = atom->tag;
   const double *x = flat(atom->x), *v = flat(atom->v);
   const double hh = 0.5 * h;
-  for (int i = 0; i < nall; i++) {
-    u[i] = x[3 * i] - x0[i];
-    w[i] = h > 0.0 ? v[3 * i] + hh * aprev[i] : v[3 * i];    // v_est = v_half + h/2 a0
-  }
-  for (int i : wall_atoms) u[i] = w[i] = 0.0;
+  // members as locals (name_): the compiler cannot tell that the stores below leave the
+  // members unchanged, and reloaded them at every contact
+  double *const u_ = u, *const w_ = w, *const fcon_ = fcon, *const fkick_ = fkick;
+  const double *const closed_ = closed, *const aprev_ = aprev, *const x0_ = x0;
+  const double gap_ = gap, damping_ = damping, delta_off_ = delta_off, sing_ = sing;
+  if (h > 0.0)
+    for (int i = 0; i < nall; i++) {
+      u_[i] = x[3 * i] - x0_[i];
+      w_[i] = v[3 * i] + hh * aprev_[i];    // v_est = v_half + h/2 a0
+    }
+  else
+    for (int i = 0; i < nall; i++) {
+      u_[i] = x[3 * i] - x0_[i];
+      w_[i] = v[3 * i];
+    }
+  for (int i : wall_atoms) u_[i] = w_[i] = 0.0;
   double power = 0.0;
   flagged.clear();
-  for (int k = 0; k < (int) cons.size(); k++) {
-    const Con &c = cons[k];
-    double d = u[c.l] - u[c.r] - gap;
-    double rate = w[c.l] - w[c.r];
+  const Con *const con = cons.data();
+  const int ncon = (int) cons.size();
+  for (int k = 0; k < ncon; k++) {
+    const Con &c = con[k];
+    double d = u_[c.l] - u_[c.r] - gap_;
+    double rate = w_[c.l] - w_[c.r];
     double F = 0.0, Fv = 0.0, g, gd;
-    if (closed[c.l] != 0.0) {
+    if (closed_[c.l] != 0.0) {
       if (use_table && d > tab_delta_max)
         error->one(FLERR, "compression {:.4g} beyond the contact table (delta_max = {:g}) at "
                    "t = {:.12g}, contact {}", d, tab_delta_max, update->ntimestep * update->dt,
                    contact_number(tag[c.l]));
       F = located_force(d);
       Fv = F;
-      if (h > 0.0 && d < sing) {    // near snap-off: mean-force kick
-        double d0 = ustart(c.l) - ustart(c.r) - gap;
+      if (h > 0.0 && d < sing_) {    // near snap-off: mean-force kick
+        double d0 = ustart(c.l) - ustart(c.r) - gap_;
         Fv = 2.0 * mean_force(d0, d) - located_force(d0);
       }
-      if (damping != 0.0) {
-        F += damping * rate;
-        Fv += damping * rate;
-        if (c.own) power += damping * rate * rate;
+      if (damping_ != 0.0) {
+        F += damping_ * rate;
+        Fv += damping_ * rate;
+        if (c.own) power += damping_ * rate * rate;
       }
-      g = d - delta_off;
+      g = d - delta_off_;
       gd = rate;
     } else {
       g = -d;
@@ -777,8 +796,8 @@ double FixMdgranChain::located_pass(double h)
     }
     // a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
     if (h > 0.0 && (g < 0.0 || g < hh * gd)) flagged.push_back(k);
-    fcon[c.l] = F;
-    fkick[c.l] = Fv;
+    fcon_[c.l] = F;
+    fkick_[c.l] = Fv;
   }
   return power;
 }
