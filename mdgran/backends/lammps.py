@@ -1,9 +1,10 @@
 """The LAMMPS backend: the same scenes run in LAMMPS (``lammps_inputs/chain.in``).
 
-LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the linear substrate is a
-``fix spring/self`` tether; the contact (law, hysteresis, unilateral damping, and the cubic
-substrate term when the scene has one) is a Python callback of ``fix external pf/callback``
-whose inner loop is compiled (:mod:`mdgran.backends.lammps_hook`, numba):
+LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the contact (law,
+hysteresis, unilateral damping) and the substrate (``chain.in``'s ``fix spring/self`` tether
+is replaced by the hook's ``-k1 u``, the same force and cheaper, and the cubic term when the
+scene has one) are a Python callback of ``fix external pf/callback`` whose inner loop is
+compiled (:mod:`mdgran.backends.lammps_hook`, numba):
 
 * **A decomposable chain.**  The beads lie on a line ``spacing`` apart (128 p: above any
   compression the contact table allows, so neighbours never pass each other) and LAMMPS splits
@@ -250,8 +251,9 @@ class LammpsBackend(Backend):
         return 2.0 ** math.ceil(math.log2(delta_max + max(float(self.model.gap), 0.0) + 1.0))
 
     def _start_native(self, lmp):
-        """Replace ``fix external`` by ``fix mdgran/chain`` (appended after the other fixes:
-        the x force is then ``(0 - k1 u) + F`` instead of ``(0 + F) - k1 u``, the same number).
+        """Replace ``fix external`` by ``fix mdgran/chain`` (appended after the other fixes,
+        with ``fix spring/self``: the x force is then ``(0 - k1 u) + F`` instead of the hook's
+        ``0 + (F - k1 u)``, the same number).
         Located events: the fix integrates the chain and applies the linear substrate itself,
         so ``fix move`` (nve) and ``fix substrate`` (spring/self) go."""
         import tempfile
@@ -302,6 +304,9 @@ class LammpsBackend(Backend):
         and, on several ranks, the communicator."""
         from . import lammps_hook
 
+        tether = lmp.has_id("fix", "substrate")  # the kernel applies its force instead
+        if tether:
+            lmp.command("unfix substrate")
         lmp.command("fix state all property/atom i_closed d_dprev d_aprev d_x0 ghost yes")
         n = lmp.extract_setting("nlocal")
         ex = lmp.numpy.extract_atom
@@ -311,7 +316,8 @@ class LammpsBackend(Backend):
         ex("d_dprev", nelem=n)[:] = 0.0
         ex("d_aprev", nelem=n)[:] = 0.0
         self._kernel = lammps_hook
-        self._par, self._ipar = lammps_hook.parameters(self.model, self.law, self.table, self.dt)
+        self._par, self._ipar = lammps_hook.parameters(self.model, self.law, self.table, self.dt,
+                                                       tether)
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0

@@ -23,7 +23,11 @@ Per contact ``k`` (left atom tag ``k``, right ``k + 1``; compression
   and, on opening, the energy ``V(delta)`` lost to hysteresis;
 * a closed contact's force ``F = f(delta) + c rate`` (``f`` from the spline table of
   :class:`mdgran.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the right
-  atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3``.
+  atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3`` and the
+  linear substrate ``-k u`` (chain.in's ``fix spring/self``, which the backend removes: its
+  per-atom ``domain->unmap`` call cost ~5 ns per bead-step; ``k`` is that fix's stiffness,
+  :func:`tether_stiffness`, and LAMMPS's force the same number, ``0 + (F - k u)`` against
+  ``(0 + F) - k u``, signed zeros included).
 
 A rank evaluates the contacts whose left atom it owns (partner owned or ghost) and those whose
 right atom it owns with a ghost left atom, the latter on the ghost's copy of the state: both
@@ -41,8 +45,8 @@ NEWTON_STEPS = 7  # as mdgran/contact.py
 # indices of the float parameters (``par``) and of the integer ones (``ipar``)
 P_GAP, P_DAMPING, P_K1, P_K3, P_DT, P_DELTA_OFF = 0, 1, 2, 3, 4, 5
 P_FC, P_SIGMA, P_TM, P_BIG, P_SQRT_BIG, P_DELTA_MIN, P_P0 = 6, 7, 8, 9, 10, 11, 12
-P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX = 13, 14, 15, 16, 17
-NPAR = 18
+P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX, P_K1_TETHER = 13, 14, 15, 16, 17, 18
+NPAR = 19
 I_WALLS, I_NTAGS, I_STRICT, I_HERTZ, I_TABLE = 0, 1, 2, 3, 4
 NIPAR = 5
 
@@ -50,8 +54,19 @@ NIPAR = 5
 OK, NON_FINITE, BEYOND_TABLE, PARTNER_MISSING = 0, 1, 2, 3
 
 
-def parameters(model, law, table, dt):
-    """``(par, ipar)`` of :func:`contact_step` for a chain model, its law and (optional) table.
+def tether_stiffness(k1) -> float:
+    """The linear substrate's stiffness as ``chain.in``'s ``fix spring/self ${k1} x`` has it:
+    LAMMPS substitutes an equal-style variable with 15 significant digits (``%.15g``), so the
+    tether's force is ``k u`` with this ``k``, not mdgran's ``k1`` (micro-star: 0.0121069489224951
+    against 0.012106948922495099).  The hook applies the tether's force itself, bitwise LAMMPS's
+    (and ``fix mdgran/chain`` quantized beside the real ``fix spring/self``); the velocity
+    estimate of the damping rate keeps ``k1``, as it always had."""
+    return float("%.15g" % float(k1))
+
+
+def parameters(model, law, table, dt, tether=False):
+    """``(par, ipar)`` of :func:`contact_step` for a chain model, its law and (optional) table;
+    ``tether``: the hook applies the linear substrate in place of ``fix spring/self``.
 
     The law's constants are taken from :class:`mdgran.contact.ContactLaw` itself (the same
     Python floats its numpy methods use), ``P_P0`` is ``P(t0)``, the energy's constant."""
@@ -60,6 +75,7 @@ def parameters(model, law, table, dt):
     par[P_GAP] = float(model.gap)
     par[P_DAMPING] = float(model.damping)
     par[P_K1] = float(model.k1)
+    par[P_K1_TETHER] = tether_stiffness(model.k1) if tether else 0.0
     par[P_K3] = float(model.k3)
     par[P_DT] = float(dt)
     par[P_DELTA_OFF] = float(law.delta_off)
@@ -319,11 +335,12 @@ def _contact_forces(pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, st
 
 @njit(inline="always")
 def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
-    """Forces on owned atoms, ``x'' = F_left - F_right - k3 u^3`` (``- k1 u`` is fix
-    spring/self's) into ``fext`` (y, z zeroed), and at a new step ``aprev`` (with ``- k1 u``).
-    Returns ``(error code, local index, value)`` (a non-finite force)."""
+    """Forces on owned atoms, ``x'' = F_left - F_right - k3 u^3 - k u`` (``k`` the tether's
+    stiffness) into ``fext`` (y, z zeroed), and at a new step ``aprev`` (``- k1 u``, as
+    before the hook applied the tether itself).  Returns ``(error code, local index, value)``
+    (a non-finite force)."""
     walls, ntags = ipar[I_WALLS], ipar[I_NTAGS]
-    k1, k3 = par[P_K1], par[P_K3]
+    k1, k3, k_tether = par[P_K1], par[P_K3], par[P_K1_TETHER]
     for i in range(nlocal):
         ext = 0.0
         t = tag[i]
@@ -334,7 +351,7 @@ def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
                 ext = ext - k3 * math.pow(u[i], 3.0)
         if not math.isfinite(ext):
             return NON_FINITE, i, ext
-        fext[i, 0] = ext
+        fext[i, 0] = ext - k_tether * u[i] if k_tether != 0.0 else ext
         fext[i, 1] = 0.0
         fext[i, 2] = 0.0
         if new_step:
@@ -360,8 +377,9 @@ def contact_list(tag, nlocal, nall, closed, tmap, ipar, left, fcon, pairs):
 @njit(cache=True)
 def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, coef, par, ipar,
                  step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events):
-    """Forces of the contacts on this rank's atoms into ``fext`` (x column; y, z zeroed) and,
-    at a new step, state switches, ``aprev`` of owned atoms and this rank's events.
+    """Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column;
+    y, z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
+    events.
 
     ``pairs[:npair]`` (the first ``nown`` of them this rank's own), ``left`` and the zeros of
     ``fcon`` are those :func:`contact_list` made for the current atoms; ``u, w, fcon``
