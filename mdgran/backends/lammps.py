@@ -251,11 +251,11 @@ class LammpsBackend(Backend):
         return 2.0 ** math.ceil(math.log2(delta_max + max(float(self.model.gap), 0.0) + 1.0))
 
     def _start_native(self, lmp):
-        """Replace ``fix external`` by ``fix mdgran/chain`` (appended after the other fixes,
-        with ``fix spring/self``: the x force is then ``(0 - k1 u) + F`` instead of the hook's
-        ``0 + (F - k1 u)``, the same number).
-        Located events: the fix integrates the chain and applies the linear substrate itself,
-        so ``fix move`` (nve) and ``fix substrate`` (spring/self) go."""
+        """Replace ``fix external`` by ``fix mdgran/chain``.  Quantized events: the fix applies
+        the linear substrate in place of ``fix substrate`` (spring/self), with that fix's
+        stiffness (``tether``, :func:`lammps_hook.tether_stiffness`), the force the hook applies,
+        bitwise.  Located events: the fix integrates the chain and applies the linear substrate
+        itself, so ``fix move`` (nve) and ``fix substrate`` go."""
         import tempfile
 
         m, law = self.model, self.law
@@ -269,10 +269,15 @@ class LammpsBackend(Backend):
             path = Path(self._tmpdir.name) / "contact.spline"
             native_plugin.write_spline(self.table, path)
             args.append(f"table {path}")
+        from .lammps_hook import tether_stiffness
+
         setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
         if self.event_mode == "located":  # the fix integrates and owns the substrate
             args.append("events located")
             setup += [f"unfix {fix}" for fix in ("move", "substrate") if lmp.has_id("fix", fix)]
+        elif lmp.has_id("fix", "substrate"):  # the fix applies the tether's force
+            args.append(f"tether {tether_stiffness(m.k1)!r}")
+            setup.append("unfix substrate")
         for cmd in (*setup, "fix contact all mdgran/chain " + " ".join(args),
                     "fix_modify contact energy yes"):
             lmp.command(cmd)

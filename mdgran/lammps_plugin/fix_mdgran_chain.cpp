@@ -17,6 +17,8 @@
 //     events quantized|located (quantized: with fix nve and fix spring/self; located: the fix
 //            integrates the atoms of its group that are not walls and applies -k1 u itself,
 //            so no fix nve and no fix spring/self may be defined beside it)
+//     tether K   (quantized: the fix applies the linear substrate -K u to the moving atoms, the
+//            force fix spring/self K x would add, bitwise, in its place; default 0: none)
 //
 // Contacts by tag: contact k joins the atoms with tags k and k+1 (found with atom->map, so
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
@@ -38,7 +40,9 @@
 //     Event time: linear interpolation of delta between the previous step and this one.
 //   * force of a closed contact F = f(delta) + c d(delta)/dt (0 when open), pushing the right
 //     atom by +F and the left one by -F; plus the cubic substrate -k3 u^3 on every atom.  The
-//     linear substrate -k1 u is fix spring/self's; k1 is given here only for the estimate below.
+//     linear substrate -k1 u is fix spring/self's, or with "tether K" this fix's -K u (one loop
+//     fewer: fix spring/self costs ~5 ns per bead-step, a domain->unmap call per atom); k1 is
+//     given here for the estimate below.
 //   * post_force sees v(t + dt/2): the damping rate uses v(t + dt) ~ v(t + dt/2) + dt/2 a(t),
 //     a(t) = contact + cubic + linear substrate force of the previous step (mass 1).
 //   * a second call for the same step (the set-up of a "run") recomputes the force and
@@ -101,7 +105,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   double lambda = 0.64;
   int fc_given = 0, init_closed = -1;
   snap_force = 0;
-  damping = k1 = k3 = gap = 0.0;
+  damping = k1 = k3 = gap = tether = 0.0;
   walls = 0;
   use_table = 0;
   located = 0;
@@ -122,6 +126,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     } else if (key == "damping") damping = utils::numeric(FLERR, val, false, lmp);
     else if (key == "k1") k1 = utils::numeric(FLERR, val, false, lmp);
     else if (key == "k3") k3 = utils::numeric(FLERR, val, false, lmp);
+    else if (key == "tether") tether = utils::numeric(FLERR, val, false, lmp);
     else if (key == "gap") gap = utils::numeric(FLERR, val, false, lmp);
     else if (key == "walls") walls = utils::logical(FLERR, val, false, lmp);
     else if (key == "closed") init_closed = utils::logical(FLERR, val, false, lmp);
@@ -133,6 +138,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     }
     else error->all(FLERR, "fix mdgran/chain: unknown keyword {}", key);
   }
+  if (located && tether != 0.0)
+    error->all(FLERR, "fix mdgran/chain: tether is for events quantized (located applies k1)");
   if (!hertz && !fc_given) {
     double alpha = (1.0 - std::exp(-lambda / 0.924)) / 1.02;
     fc = -6.0 / (alpha * alpha + 3.0);
@@ -231,6 +238,11 @@ void FixMdgranChain::init()
   if (comm->nprocs > 1 && !comm->ghost_velocity)
     error->all(FLERR, "fix mdgran/chain on several ranks needs comm_modify vel yes");
   if (atom->natoms > MAXSMALLINT) error->all(FLERR, "fix mdgran/chain: too many atoms");
+  if (tether != 0.0)
+    for (auto *fix : modify->get_fix_list())
+      if (utils::strmatch(fix->style, "^spring/self"))
+        error->all(FLERR, "fix mdgran/chain tether applies the linear substrate itself: unfix "
+                   "{} (fix spring/self)", fix->id);
   if (!located) return;
   // located: this fix moves the chain and owns every x force, so no other fix may do either
   for (auto *fix : modify->get_fix_list()) {
@@ -376,15 +388,24 @@ void FixMdgranChain::compute(bigint step)
   std::vector<Event> found;    // events of this step with their lost energy
   std::vector<double> lost;
 
-  // 0. displacement u = x - x0 and velocity estimate w of every atom, owned and ghost
-  for (int i = 0; i < nall; i++) {
-    if (is_wall(tag[i])) {
-      u[i] = w[i] = 0.0;
-    } else {
-      u[i] = x[i][0] - x0[i];
-      w[i] = use_est ? v[i][0] + 0.5 * dt * aprev[i] : v[i][0];
+  // 0. displacement u = x - x0 and velocity estimate w of every atom, owned and ghost (walls:
+  // 0); members as locals (name_), as in located_pass
+  if (contacts_stale) build_contacts();
+  double *const u_ = u, *const w_ = w, *const fcon_ = fcon, *const closed_ = closed;
+  double *const dprev_ = dprev, *const aprev_ = aprev;
+  const double *const x0_ = x0, *const xf = flat(x), *const vf = flat(v);
+  const double gap_ = gap, damping_ = damping, delta_off_ = delta_off, hdt = 0.5 * dt;
+  if (use_est)
+    for (int i = 0; i < nall; i++) {
+      u_[i] = xf[3 * i] - x0_[i];
+      w_[i] = vf[3 * i] + hdt * aprev_[i];
     }
-  }
+  else
+    for (int i = 0; i < nall; i++) {
+      u_[i] = xf[3 * i] - x0_[i];
+      w_[i] = vf[3 * i];
+    }
+  for (int i : wall_atoms) u_[i] = w_[i] = 0.0;
 
   // a switch of contact l at this step (rare): its event time and lost energy, on the owner
   auto record = [&](int l, double delta, int opening) __attribute__((noinline)) {
@@ -403,47 +424,52 @@ void FixMdgranChain::compute(bigint step)
   };
   // one contact (left atom l, right atom r): state update at a new step, then its force
   auto contact = [&](int l, int r, int own) __attribute__((always_inline)) {
-    double delta = u[l] - u[r];
-    if (gap != 0.0) delta = delta - gap;
-    double rate = w[l] - w[r];
+    double delta = u_[l] - u_[r];
+    if (gap_ != 0.0) delta = delta - gap_;
+    double rate = w_[l] - w_[r];
     if (new_step) {
-      int c = closed[l] != 0.0;
-      int opening = c && (strict ? delta < 0.0 : delta <= delta_off);
+      int c = closed_[l] != 0.0;
+      int opening = c && (strict ? delta < 0.0 : delta <= delta_off_);
       int closing = !c && (strict ? delta > 0.0 : delta >= 0.0);
       if (opening || closing) {
         if (own) record(l, delta, opening);
-        closed[l] = opening ? 0.0 : 1.0;
+        closed_[l] = opening ? 0.0 : 1.0;
       }
-      if (own) dprev[l] = delta;
+      if (own) dprev_[l] = delta;
     }
     if (use_table && delta > tab_delta_max) overflow(l, delta);
     double F = 0.0;
-    if (closed[l] != 0.0) {
+    if (closed_[l] != 0.0) {
       F = use_table ? spline_force(delta) : exact_force(delta);
-      if (damping != 0.0) F = F + damping * rate;
-      if (own && new_step && damping != 0.0) power += rate * rate;
+      if (damping_ != 0.0) F = F + damping_ * rate;
+      if (own && new_step && damping_ != 0.0) power += rate * rate;
     }
-    fcon[l] = F;
+    fcon_[l] = F;
   };
 
   // 1. the contacts this rank evaluates (build_contacts): owned left atom (own), or a ghost
   // left atom and an owned right one (the same update on the copy)
-  if (contacts_stale) build_contacts();
-  for (const Con &c : cons) contact(c.l, c.r, c.own);
-  // 3. forces on owned atoms: x'' = F_left - F_right - k3 u^3 (- k1 u by fix spring/self)
-  double **f = atom->f;
-  int *mask = atom->mask;
+  const Con *const con = cons.data();
+  const int ncon = (int) cons.size();
+  for (int k = 0; k < ncon; k++) contact(con[k].l, con[k].r, con[k].own);
+  // 3. forces on owned atoms: x'' = F_left - F_right - k3 u^3 (- k1 u by fix spring/self, or
+  // by this fix with tether: 0 + (ext - K u), the number fix spring/self's (0 + ext) - K u is)
+  double *const f = flat(atom->f);
+  const int *const mask = atom->mask, *const left_ = left;
+  const double k1_ = k1, k3_ = k3, tether_ = tether;
+  const int bit = groupbit;
   double check = 0.0;
   for (int i = 0; i < nlocal; i++) {
     double ext = 0.0;
-    if (!is_wall(tag[i])) {
-      double fl = left[i] >= 0 ? fcon[left[i]] : 0.0;
-      ext = (0.0 - fcon[i]) + fl;
-      if (k3 != 0.0) ext = ext - k3 * std::pow(u[i], 3.0);
+    const int wall = is_wall(tag[i]);
+    if (!wall) {
+      double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
+      ext = (0.0 - fcon_[i]) + fl;
+      if (k3_ != 0.0) ext = ext - k3_ * std::pow(u_[i], 3.0);
     }
     check += ext * 0.0;    // 0, unless some ext is not finite (NaN then)
-    if (mask[i] & groupbit) f[i][0] += ext;
-    if (new_step) aprev[i] = k1 != 0.0 ? ext - k1 * u[i] : ext;
+    if (mask[i] & bit) f[3 * i] += tether_ != 0.0 && !wall ? ext - tether_ * u_[i] : ext;
+    if (new_step) aprev_[i] = k1_ != 0.0 ? ext - k1_ * u_[i] : ext;
   }
   if (check != 0.0) {    // rare: find the first bead with a non-finite force
     for (int i = 0; i < nlocal; i++) {

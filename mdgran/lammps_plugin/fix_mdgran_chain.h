@@ -65,6 +65,7 @@ class FixMdgranChain : public Fix {
   int strict;                               // delta_off == 0: strict inequalities
   int snap_force;                           // snap-off rule: 0 displacement, 1 force
   double damping, k1, k3, gap;
+  double tether;                            // quantized: the linear substrate's K (0: none)
   int walls;
   // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
   int use_table, tab_n;
