@@ -99,6 +99,36 @@ fix line all setforce NULL 0.0 0.0""", "pe f_contact[1] f_contact[2] f_contact[3
     np.testing.assert_allclose(thermo["two"], thermo["one"], rtol=1e-12)
 
 
+def test_tether_is_fix_spring_self_bitwise(plugin, tmp_path):
+    """Quantized, ``tether K`` applies the linear substrate the way ``fix spring/self K x`` does
+    (the backend uses it in that fix's place: one loop per step fewer): the same run bit for
+    bit, thermo included; beside a spring/self, or with events located, it is refused."""
+    contact = ("fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 "
+               "k3 0.002 walls yes")
+    tail = "fix_modify contact energy yes\nfix move mobile nve"
+    spring = "fix substrate mobile spring/self 0.012 x"
+    scripts = {"spring": f"{contact}\n{tail}\n{spring}",
+               "tether": f"{contact} tether 0.012\n{tail}",
+               "both": f"{contact} tether 0.012\n{tail}\n{spring}",
+               "located": f"{contact} tether 0.012 events located\nfix_modify contact energy yes"}
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    out = {}
+    for tag, fixes in scripts.items():
+        (tmp_path / f"{tag}.in").write_text(spread_chain_input(plugin, fixes, "ke pe f_contact[1]"))
+        out[tag] = subprocess.run([lmp, "-var", "tag", tag, "-in", f"{tag}.in"], cwd=tmp_path,
+                                  capture_output=True, text=True, timeout=120)
+    assert out["spring"].returncode == 0 and out["tether"].returncode == 0
+    final = {tag: (tmp_path / f"final.{tag}").read_text() for tag in ("spring", "tether")}
+    assert final["tether"] == final["spring"]
+    rows = {tag: [ln for ln in out[tag].stdout.splitlines() if ln.strip().startswith("1200 ")]
+            for tag in ("spring", "tether")}
+    assert rows["tether"] == rows["spring"] and rows["spring"]
+    assert out["both"].returncode != 0
+    assert "unfix substrate (fix spring/self)" in out["both"].stdout + out["both"].stderr
+    assert out["located"].returncode != 0
+    assert "tether is for events quantized" in out["located"].stdout + out["located"].stderr
+
+
 def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
     """mpiexec -n 2 with the backend's input (one slab of the chain per rank): as serial."""
     code = ("import sys; from mdgran.scene import load_scene; from mdgran.simulation import run; "
