@@ -159,6 +159,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   delta_off = hertz ? 0.0 : (snap_force ? delta_fmax : delta_min);
   strict = delta_off == 0.0;
   t0 = std::pow(4.0 * sigma, 1.0 / 3.0);
+  p_t0 = hertz ? 0.0 : antiderivative(t0);    // V's constant, once (3 pow calls per energy)
   if (use_table) read_table(table_file.c_str());
   // displacement snap-off of Schwarz: f ~ sqrt(delta - delta_min) near the event
   sing = (!hertz && !snap_force && tm > 0.0) ? delta_min + SING_BAND : -INFINITY;
@@ -301,7 +302,7 @@ double FixMdgranChain::law_energy(double d) const
     double dp = std::max(d, 0.0);
     return 0.4 * dp * dp * std::sqrt(dp);
   }
-  return antiderivative(t_of_delta(d)) - antiderivative(t0);
+  return antiderivative(t_of_delta(d)) - p_t0;
 }
 
 // The spline table of mdgran.contact.ContactTable.write_spline: keyword lines, then the

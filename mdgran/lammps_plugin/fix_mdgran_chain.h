@@ -62,6 +62,7 @@ class FixMdgranChain : public Fix {
   // law constants (names of mdgran/contact.py)
   int hertz;                                // 1: f = delta_+^(3/2); 0: Schwarz
   double fc, sigma, tm, big, sqrt_big, delta_min, delta_off, t0;
+  double p_t0;                              // P(t0): V(delta) = P(t(delta)) - P(t0)
   int strict;                               // delta_off == 0: strict inequalities
   int snap_force;                           // snap-off rule: 0 displacement, 1 force
   double damping, k1, k3, gap;
