@@ -23,6 +23,11 @@ synchronises them every step).  Peak RSS (``ru_maxrss``) of every rank.  ``os.ge
 before and after every point: the machine has 2 cores, and a load above ~0.5 before a 1-rank
 point (~0.2 before a 2-rank one) means other work shared them.  Writes
 benchmarks/results/lammps_scaling.json (``--out`` to change).
+
+``--against REV`` measures every point also with revision REV (a git worktree of it on the
+``PYTHONPATH``; its plugin is built into the user cache on first use), alternating the two trees
+``--rounds`` times (before, after, after, before, ...), so that a change is judged on a busy
+machine against the same load; each row says its ``tree`` (``before``: REV, ``after``: this one).
 """
 from __future__ import annotations
 
@@ -94,11 +99,15 @@ def worker(n: int, mode: str, steps: int, repeats: int, report_dir: str):
 # ---- the driver -----------------------------------------------------------------------------
 
 def measure(n: int, mode: str, ranks: int, repeats: int, bead_steps: float,
-            before_tree: Path | None) -> dict:
+            before_tree: Path | None, tree: Path | None = None) -> dict:
+    """One point in a process of its own; ``tree``: the mdgran checkout to import (a worktree
+    of another revision), default this one."""
     steps = steps_for(n, bead_steps)
     row = {"n": n, "contact": mode, "ranks": ranks, "steps_per_repeat": steps,
            "repeats": repeats, "loadavg_before": os.getloadavg()}
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    if tree is not None:
+        env["PYTHONPATH"] = str(tree)
     if mode == "hook-before":
         if before_tree is None:
             return {**row, "error": "no worktree of the 'before' revision"}
@@ -161,6 +170,10 @@ def main(argv=None):
     ap.add_argument("--before", default=BEFORE, help="revision of the 'hook-before' case")
     ap.add_argument("--before-on-ranks", action="store_true",
                     help="also run 'hook-before' on several ranks")
+    ap.add_argument("--against", default=None,
+                    help="also measure every point with this revision (alternating trees)")
+    ap.add_argument("--rounds", type=int, default=2,
+                    help="with --against: measurements of each point per tree")
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--mode", default=None, help=argparse.SUPPRESS)
@@ -171,22 +184,36 @@ def main(argv=None):
         return worker(args.worker, args.mode, args.steps, args.repeats, args.report_dir)
     points = plan(args)
     tree = before_worktree(args.before) if any(p[1] == "hook-before" for p in points) else None
+    against = before_worktree(args.against) if args.against else None
+    if args.against and against is None:
+        raise SystemExit(f"cannot make a git worktree of {args.against}")
     rows = []
     try:
         for n, mode, ranks in points:
-            row = measure(n, mode, ranks, args.repeats, args.bead_steps, tree)
-            rows.append(row)
-            print(json.dumps({k: v for k, v in row.items() if k != "ns_per_bead_step"}),
-                  flush=True)
+            if against is None:
+                runs = [(None, None)]
+            else:  # before, after, after, before, ...: both trees see the same drift in load
+                order = [("before", against), ("after", None)]
+                runs = [r for k in range(args.rounds) for r in (order if k % 2 == 0
+                                                                 else order[::-1])]
+            for label, where in runs:
+                row = measure(n, mode, ranks, args.repeats, args.bead_steps, tree, where)
+                if label is not None:
+                    row = {"tree": label, **row}
+                rows.append(row)
+                print(json.dumps({k: v for k, v in row.items() if k != "ns_per_bead_step"}),
+                      flush=True)
     finally:
-        if tree is not None:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
-                           capture_output=True)
-            shutil.rmtree(tree.parent, ignore_errors=True)
+        for t in (tree, against):
+            if t is not None:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(t)],
+                               capture_output=True)
+                shutil.rmtree(t.parent, ignore_errors=True)
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True).stdout.strip()
     result = {"benchmark": "LAMMPS contact cost per bead-step, 1 and 2 ranks (micro-star)",
-              "revision": head, "before_revision": args.before, "dt": DT,
+              "revision": head, "before_revision": args.before, "against": args.against,
+              "dt": DT,
               "cpu_count": os.cpu_count(), "machine": platform.machine(),
               "note": "ns per bead-step = wall time of a timed run / (N * steps), rank 0; "
                       "loadavg_before/after: 1, 5, 15-minute load averages; a 1-minute load "
