@@ -5,7 +5,8 @@
 
 Cases (micro-star's physics with N beads, lammps_inputs/chain.in as the backend sets it up):
 
-* ``none``        no contact (``unfix contact``): LAMMPS's own cost, the floor;
+* ``none``        no contact (``unfix contact``): LAMMPS's own cost with chain.in's fix nve and
+                  fix spring/self (put back where the backend took it out), the floor;
 * ``hook-before`` the numpy hook of revision ``--before`` (default a0662a2, the last with it:
                   whole-chain ghosts, every contact on every rank), run from a git worktree of
                   that revision (its own chain.in);
@@ -78,6 +79,8 @@ def worker(n: int, mode: str, steps: int, repeats: int, report_dir: str):
             for fix in ("contact", "state"):
                 if lmp.has_id("fix", fix):
                     lmp.command(f"unfix {fix}")
+            if sc.data["substrate"]["k1"] and not lmp.has_id("fix", "substrate"):
+                lmp.command("fix substrate mobile spring/self ${k1} x")  # as chain.in has it
             lmp.command("thermo_style custom step time ke pe")
         lmp.command("run 0 post no")
         lmp.command(f"run {steps} pre no post no")  # warm-up
