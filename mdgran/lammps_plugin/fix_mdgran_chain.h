@@ -123,6 +123,8 @@ class FixMdgranChain : public Fix {
   std::vector<int> wall_atoms;              // walls among the owned and ghost atoms
   void build_contacts();
   int contacts_stale;                       // cons and left[] need rebuilding (re-neighboured)
+  double drift_h;                           // h of the drift that left the owned atoms' u, w
+                                            // for the next pass (-1: none)
   // f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free
   // of its round-off force at delta = 0, which would make resting contacts flicker), else as set
   inline double located_force(double d) const
