@@ -99,34 +99,42 @@ fix line all setforce NULL 0.0 0.0""", "pe f_contact[1] f_contact[2] f_contact[3
     np.testing.assert_allclose(thermo["two"], thermo["one"], rtol=1e-12)
 
 
-def test_tether_is_fix_spring_self_bitwise(plugin, tmp_path):
+def test_tether_and_integrate_are_the_lammps_fixes_bitwise(plugin, tmp_path):
     """Quantized, ``tether K`` applies the linear substrate the way ``fix spring/self K x`` does
-    (the backend uses it in that fix's place: one loop per step fewer): the same run bit for
-    bit, thermo included; beside a spring/self, or with events located, it is refused."""
+    and ``integrate yes`` moves the chain the way ``fix nve`` does (the backend uses both in
+    those fixes' place: loops over the atoms fewer): the same run bit for bit, thermo included;
+    beside the fix it replaces, or with events located, each is refused."""
     contact = ("fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 "
                "k3 0.002 walls yes")
-    tail = "fix_modify contact energy yes\nfix move mobile nve"
-    spring = "fix substrate mobile spring/self 0.012 x"
-    scripts = {"spring": f"{contact}\n{tail}\n{spring}",
-               "tether": f"{contact} tether 0.012\n{tail}",
-               "both": f"{contact} tether 0.012\n{tail}\n{spring}",
-               "located": f"{contact} tether 0.012 events located\nfix_modify contact energy yes"}
+    energy = "fix_modify contact energy yes"
+    nve, spring = "fix move mobile nve", "fix substrate mobile spring/self 0.012 x"
+    scripts = {"fixes": f"{contact}\n{energy}\n{nve}\n{spring}",
+               "tether": f"{contact} tether 0.012\n{energy}\n{nve}",
+               "both": f"{contact} tether 0.012 integrate yes\n{energy}",
+               "spring": f"{contact} tether 0.012\n{energy}\n{nve}\n{spring}",
+               "nve": f"{contact} integrate yes\n{energy}\n{nve}\n{spring}",
+               "located": f"{contact} tether 0.012 events located\n{energy}"}
     lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
     out = {}
     for tag, fixes in scripts.items():
-        (tmp_path / f"{tag}.in").write_text(spread_chain_input(plugin, fixes, "ke pe f_contact[1]"))
+        (tmp_path / f"{tag}.in").write_text(spread_chain_input(plugin, fixes,
+                                                               "ke pe f_contact[1]"))
         out[tag] = subprocess.run([lmp, "-var", "tag", tag, "-in", f"{tag}.in"], cwd=tmp_path,
                                   capture_output=True, text=True, timeout=120)
-    assert out["spring"].returncode == 0 and out["tether"].returncode == 0
-    final = {tag: (tmp_path / f"final.{tag}").read_text() for tag in ("spring", "tether")}
-    assert final["tether"] == final["spring"]
+    same = ("fixes", "tether", "both")
+    assert all(out[tag].returncode == 0 for tag in same)
+    final = {tag: (tmp_path / f"final.{tag}").read_text() for tag in same}
     rows = {tag: [ln for ln in out[tag].stdout.splitlines() if ln.strip().startswith("1200 ")]
-            for tag in ("spring", "tether")}
-    assert rows["tether"] == rows["spring"] and rows["spring"]
-    assert out["both"].returncode != 0
-    assert "unfix substrate (fix spring/self)" in out["both"].stdout + out["both"].stderr
-    assert out["located"].returncode != 0
-    assert "tether is for events quantized" in out["located"].stdout + out["located"].stderr
+            for tag in same}
+    assert rows["fixes"] and float(rows["fixes"][0].split()[3]) > 0  # a snap-off happened
+    for tag in same[1:]:
+        assert final[tag] == final["fixes"]
+        assert rows[tag] == rows["fixes"]
+    for tag, words in (("spring", "unfix substrate (fix spring/self)"),
+                       ("nve", "integrate yes integrates the chain itself: unfix move"),
+                       ("located", "tether is for events quantized")):
+        assert out[tag].returncode != 0
+        assert words in out[tag].stdout + out[tag].stderr
 
 
 def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):

@@ -254,8 +254,10 @@ class LammpsBackend(Backend):
         """Replace ``fix external`` by ``fix mdgran/chain``.  Quantized events: the fix applies
         the linear substrate in place of ``fix substrate`` (spring/self), with that fix's
         stiffness (``tether``, :func:`lammps_hook.tether_stiffness`), the force the hook applies,
-        bitwise.  Located events: the fix integrates the chain and applies the linear substrate
-        itself, so ``fix move`` (nve) and ``fix substrate`` go."""
+        and moves the chain with ``fix move``'s velocity Verlet in its place (``integrate
+        yes``): bitwise the hook's run, two loops over the atoms fewer per step.  Located
+        events: the fix integrates the chain and applies the linear substrate itself, so
+        ``fix move`` (nve) and ``fix substrate`` go."""
         import tempfile
 
         m, law = self.model, self.law
@@ -275,9 +277,13 @@ class LammpsBackend(Backend):
         if self.event_mode == "located":  # the fix integrates and owns the substrate
             args.append("events located")
             setup += [f"unfix {fix}" for fix in ("move", "substrate") if lmp.has_id("fix", fix)]
-        elif lmp.has_id("fix", "substrate"):  # the fix applies the tether's force
-            args.append(f"tether {tether_stiffness(m.k1)!r}")
-            setup.append("unfix substrate")
+        else:  # the fix applies the tether's force and does fix nve's work
+            if lmp.has_id("fix", "substrate"):
+                args.append(f"tether {tether_stiffness(m.k1)!r}")
+                setup.append("unfix substrate")
+            if lmp.has_id("fix", "move"):
+                args.append("integrate yes")
+                setup.append("unfix move")
         for cmd in (*setup, "fix contact all mdgran/chain " + " ".join(args),
                     "fix_modify contact energy yes"):
             lmp.command(cmd)

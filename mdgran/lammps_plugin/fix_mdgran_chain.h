@@ -21,6 +21,7 @@ class FixMdgranChain : public Fix {
   void pre_neighbor() override;
   void setup(int) override;
   void initial_integrate(int) override;
+  void final_integrate() override;
   void post_force(int) override;
   void post_run() override;
 
@@ -67,6 +68,8 @@ class FixMdgranChain : public Fix {
   int snap_force;                           // snap-off rule: 0 displacement, 1 force
   double damping, k1, k3, gap;
   double tether;                            // quantized: the linear substrate's K (0: none)
+  int integrate;                            // quantized: the fix moves the atoms (fix nve's)
+  void nve(int first);
   int walls;
   // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
   int use_table, tab_n;
