@@ -999,8 +999,8 @@ void FixMdgranChain::final_integrate()
 // Quantized with "integrate yes": fix nve's velocity Verlet for the atoms this fix moves (runs),
 // along x (the chain has no y or z velocity or force), with fix nve's operations, so that the
 // run is bitwise the run with fix nve: v += dtf/m f, then (first half) x += dt v.  One loop over
-// the moving atoms each half, without fix nve's mask test and y, z components (~4 ns per
-// bead-step less).
+// the moving atoms each half, without fix nve's mask test and y, z components (~2 ns per
+// bead-step less at N = 1e5).
 void FixMdgranChain::nve(int first)
 {
   if (contacts_stale) build_contacts();    // runs are those of the current atoms
