@@ -109,10 +109,10 @@ def test_patterns_lay_out_the_diameters():
     assert r == pytest.approx(d**3)
 
 
-def test_only_the_reference_backend_runs_unlike_beads(tmp_path):
-    """fast and LAMMPS refuse a mixed chain before running: exit 2, one line, the key."""
+def test_lammps_refuses_unlike_beads(tmp_path):
+    """LAMMPS refuses a mixed chain before running: exit 2, one line, the key."""
     proc = subprocess.run([sys.executable, "-m", "mdgran", "run", "micro-star", "--backend",
-                           "fast", "--out", str(tmp_path / "x.h5"), "--set",
+                           "lammps", "--out", str(tmp_path / "x.h5"), "--set",
                            "beads.pattern=dimer", "--set", "beads.ratio=0.8", "--set",
                            "chain.n=21"], capture_output=True, text=True)
     assert proc.returncode == 2
@@ -121,16 +121,36 @@ def test_only_the_reference_backend_runs_unlike_beads(tmp_path):
 
 
 # ---- against analytic results --------------------------------------------------------------
+UNLIKE_PAIR = dict(s=[1.0, 0.6], rho=[1.0, 2.0], k=[1.0, 0.5], a=[1.0, 1.5], v0=3.0)
+
+
+def unlike_pair_scene(dt=0.01):
+    p = UNLIKE_PAIR
+    return make_scene(chain={"n": 2, "boundary": "free"}, contact={"damping": 0.0},
+                      substrate={"k1": 0.0}, impulse={"velocity": p["v0"]},
+                      beads={"diameter": p["s"], "density": p["rho"], "modulus": p["k"],
+                             "adhesion": p["a"]},
+                      run={"duration": 20.0, "output_interval": 1.0, "tolerance": 1e-11,
+                           "dt": dt})
+
+
+def unlike_pair_after():
+    """``(W_pair, v1, v2)``: the pair's loop energy and both velocities after it separates."""
+    p = UNLIKE_PAIR
+    A, L, law = pair_by_hand(*p["s"], *p["k"], *p["a"])
+    m1, m2 = p["rho"][0] * p["s"][0] ** 3, p["rho"][1] * p["s"][1] ** 3
+    w_pair = A * L * law.loop_energy
+    v_rel = math.sqrt(p["v0"] ** 2 - 2 * w_pair * (m1 + m2) / (m1 * m2))
+    v_cm = m1 * p["v0"] / (m1 + m2)
+    return w_pair, v_cm - m2 / (m1 + m2) * v_rel, v_cm + m1 / (m1 + m2) * v_rel
+
+
 def test_unlike_pair_restitution():
     """Two free unlike beads, bead 1 at v0: after the contact opens once, the relative kinetic
     energy is ``mu v0^2 / 2`` less the pair's own loop energy ``A L W(fc_pair)``, with the reduced
     mass ``mu``; momentum is conserved."""
-    s, rho, k, a, v0 = [1.0, 0.6], [1.0, 2.0], [1.0, 0.5], [1.0, 1.5], 3.0
-    sc = make_scene(chain={"n": 2, "boundary": "free"}, contact={"damping": 0.0},
-                    substrate={"k1": 0.0}, impulse={"velocity": v0},
-                    beads={"diameter": s, "density": rho, "modulus": k, "adhesion": a},
-                    run={"duration": 20.0, "output_interval": 1.0, "tolerance": 1e-11})
-    res = run(sc, "reference")
+    s, rho, k, a, v0 = (UNLIKE_PAIR[key] for key in ("s", "rho", "k", "a", "v0"))
+    res = run(unlike_pair_scene(), "reference")
     tr = res.trajectory
     A, L, law = pair_by_hand(*s, *k, *a)
     m1, m2 = rho[0] * s[0] ** 3, rho[1] * s[1] ** 3
@@ -269,3 +289,45 @@ def test_random_free_mixtures_conserve_momentum_and_close_the_ledger(s, rho, v0)
     p = res.trajectory.v @ m
     assert np.abs(p - m[0] * v0).max() < 1e-9 * (1 + m[0] * v0)
     assert res.status == "complete"
+
+
+# ---- the fast backend --------------------------------------------------------------------------
+def test_fast_unlike_pair_is_second_order_to_the_analytic_restitution():
+    """The fast backend on the unlike pair: the velocities after the snap-off approach the
+    analytic ones at second order in dt (located events), one snap-off each time."""
+    w_pair, v1, v2 = unlike_pair_after()
+    errs = []
+    for dt in (0.02, 0.01, 0.005):
+        tr = run(unlike_pair_scene(dt), "fast").trajectory
+        assert list(tr.ev_kind) == [0]
+        assert tr.ledger["dissipated_hysteresis"][-1] == pytest.approx(w_pair, rel=1e-3)
+        errs.append(max(abs(tr.v[-1, 0] - v1), abs(tr.v[-1, 1] - v2)))
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert errs[-1] < 1e-4 and np.all(orders > 1.8), (errs, orders)
+
+
+@pytest.mark.parametrize("d_striker, density", [(1.5, 1.0), (0.7, 2.5)])
+def test_fast_striker_on_free_hertz_pair(d_striker, density):
+    """The elastic collision of a striker on a free Hertz bead, on the fast backend (dt 1e-3)."""
+    v0, m1 = 2.0, density * d_striker**3
+    sc = make_scene(chain={"n": 2, "boundary": "free"}, contact={"law": "hertz", "damping": 0.0},
+                    substrate={"k1": 0.0}, impulse={"velocity": v0},
+                    striker={"diameter": d_striker, "density": density},
+                    run={"duration": 30.0, "output_interval": 1.0, "dt": 1e-3})
+    tr = run(sc, "fast").trajectory
+    assert tr.v[-1, 0] == pytest.approx((m1 - 1) / (m1 + 1) * v0, abs=1e-5)
+    assert tr.v[-1, 1] == pytest.approx(2 * m1 / (m1 + 1) * v0, abs=1e-5)
+
+
+@pytest.mark.parametrize("name", ["mixed/dimer", "mixed/intruder", "mixed/striker"])
+def test_fast_follows_the_reference_on_mixed_scenes(name):
+    """fast (dt 0.0025, and half that) and reference (tol 1e-10) on the built-in mixed scenes to
+    t = 10: the same events, and the fast run's difference from the reference within 4x its
+    own error estimate (its difference from the half-step run, times 4/3 for second order)."""
+    sc = load_scene(name, [("run.duration", 10.0), ("run.tolerance", 1e-10)])
+    ref = run(sc, "reference").trajectory
+    fast = run(sc, "fast", set={"run.dt": 0.0025}).trajectory
+    fine = run(sc, "fast", set={"run.dt": 0.00125}).trajectory
+    assert list(zip(fast.ev_contact, fast.ev_kind)) == list(zip(ref.ev_contact, ref.ev_kind))
+    own = 4.0 / 3.0 * np.abs(fast.x - fine.x).max()
+    assert 0 < np.abs(fast.x - ref.x).max() < 4.0 * own

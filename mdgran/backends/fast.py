@@ -65,6 +65,7 @@ class FastBackend(Backend):
     #: paper-robustness sweep at dt = 0.0025, largest at v0 = 64; built-in and hard scenes
     #: 1.4-3.3), up to 1.0 step-quantized (hard/jkr-force at dt = 0.01): 3.5x and 4x margins
     ledger_c = {2: 15.0, 1: 4.0}
+    runs_mixtures = True
 
     def __init__(self, scene, locate_events: bool = True, contact_eval: str = "table",
                  table_points: int | None = None, delta_max: float = 100.0, **options):
@@ -94,10 +95,12 @@ class FastBackend(Backend):
             gap=float(m.gap), damping=float(m.damping), k1=float(m.k1), k3=float(m.k3),
             delta_off=float(law.delta_off), delta_max=self.table.delta_max,
             mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
-            law=schwarz_constants(law), table=table)
+            law=schwarz_constants(law), table=table,
+            mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max))
         self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
                               k3_on=m.k3 != 0.0, locate=self.locate,
-                              exact=contact_eval == "exact", hertz=law.kind == "hertz")
+                              exact=contact_eval == "exact", hertz=law.kind == "hertz",
+                              mixed=m.mixture is not None)
         self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
@@ -105,6 +108,29 @@ class FastBackend(Backend):
                       "contact_eval": contact_eval, "wall_time_s": 0.0, "kernel_s": 0.0}
         if contact_eval == "table":
             self.stats["table"] = self.table.error()
+
+    def _mix(self, points: int, delta_max: float) -> fk.Mix:
+        """The kernel's :class:`~mdgran.backends.fast_kernel.Mix` of the scene's unlike beads:
+        a force table of ``points`` nodes to ``delta_max`` (own units) per distinct law."""
+        mix = self.model.mixture
+        laws = mix.laws
+        tables = [ContactTable(law, points, delta_max) for law in laws]
+        length = np.ascontiguousarray(mix.length_scale, dtype=float)
+        own_below = np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
+                              and law.snap_off == "displacement" and law.t_min > 0.0
+                              else -math.inf for law in laws])
+        return fk.Mix(
+            inv_mass=1.0 / mix.mass, on_site=np.ascontiguousarray(mix.substrate, dtype=float),
+            force_scale=np.ascontiguousarray(mix.force_scale, dtype=float),
+            inv_len=1.0 / length, length=length,
+            delta_off=np.ascontiguousarray(mix.delta_off, dtype=float),
+            mean_below=length * own_below[mix.law_index],
+            cls=np.ascontiguousarray(mix.law_index, dtype=np.int64),
+            laws=np.array([tuple(schwarz_constants(law)) for law in laws], dtype=float),
+            coef=np.ascontiguousarray(np.stack([t.f_coef for t in tables]), dtype=float),
+            base=np.array([t.base for t in tables], dtype=float),
+            scale=np.array([t._scale for t in tables], dtype=float),
+            step=np.array([t._h for t in tables], dtype=float))
 
     # ---- state ----------------------------------------------------------------------------
     def _alloc(self):

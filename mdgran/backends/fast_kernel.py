@@ -98,6 +98,7 @@ class Flags(NamedTuple):
     locate: bool  # events located inside the step (else switched at the step's end)
     exact: bool  # the exact law instead of the force table
     hertz: bool  # the Hertz law (else Schwarz)
+    mixed: bool = False  # unlike beads: per-bead masses, per-contact laws (:class:`Mix`)
 
 
 class ForceTable(NamedTuple):
@@ -112,6 +113,37 @@ class ForceTable(NamedTuple):
     step: float  # node spacing in w
 
 
+class Mix(NamedTuple):
+    """A chain of unlike beads (:class:`mdgran.mixture.Mixture`; empty arrays otherwise):
+    contact ``j`` has the law of class ``cls[j]`` in its own units, scaled as
+    ``F = force_scale[j] f(delta / L_j)``, ``V = force_scale[j] L_j V(delta / L_j)``; bead
+    ``i`` has mass ``1 / inv_mass[i]`` and substrate factor ``on_site[i]`` (0 or 1).  Each
+    class has a force table (rows of ``coef``, ``base``, ``scale``, ``step``, as
+    :class:`ForceTable`'s, with the same number of nodes) and its Schwarz constants (a row of
+    ``laws``, :class:`~mdgran.contact_scalar.SchwarzConstants`' fields)."""
+
+    inv_mass: np.ndarray  # [n]
+    on_site: np.ndarray  # [n]
+    force_scale: np.ndarray  # [m] A
+    inv_len: np.ndarray  # [m] 1 / L
+    length: np.ndarray  # [m] L
+    delta_off: np.ndarray  # [m] L * delta_off of the class (units p)
+    mean_below: np.ndarray  # [m] L * (delta_min + SING_BAND), or -inf (no mean-force kick)
+    cls: np.ndarray  # [m] int64
+    laws: np.ndarray  # [classes, 5]
+    coef: np.ndarray  # [classes, nodes - 1, 4]
+    base: np.ndarray  # [classes]
+    scale: np.ndarray  # [classes]
+    step: np.ndarray  # [classes]
+
+
+def no_mix() -> Mix:
+    """The :class:`Mix` of a homogeneous chain: empty arrays (never read)."""
+    e = np.zeros(0)
+    return Mix(e, e, e, e, e, e, e, np.zeros(0, dtype=np.int64), np.zeros((0, 5)),
+               np.zeros((0, 0, 4)), e, e, e)
+
+
 class Params(NamedTuple):
     """The constants of one run (units of :mod:`mdgran.chain`)."""
 
@@ -124,6 +156,7 @@ class Params(NamedTuple):
     mean_force_below: float  # closed contacts with delta below it get the mean-force kick
     law: SchwarzConstants
     table: ForceTable
+    mix: Mix  # unlike beads (flags.mixed); no_mix() otherwise
 
 
 class Beads(NamedTuple):
@@ -267,6 +300,77 @@ def closed_force(exact, hertz, d, params):
     return f
 
 
+# ---- unlike beads: each contact's own law (flags.mixed; Mix) --------------------------------
+@njit(inline="always")
+def class_law(mix, c):
+    """The Schwarz constants of law class c."""
+    return SchwarzConstants(mix.laws[c, 0], mix.laws[c, 1], mix.laws[c, 2], mix.laws[c, 3],
+                            mix.laws[c, 4])
+
+
+@njit(inline="always")
+def class_spline(params, c, u):
+    """(f, ok): table force of class c at its own compression u (as :func:`contact_force`;
+    outside the table f is the last node's).  Written without an early return and without
+    array locals: numba then prunes the reference counting of the arrays it reads, which
+    otherwise cost 6x the whole pass."""
+    u = u - params.mix.base[c]
+    if u < 0.0:
+        u = 0.0
+    w = math.sqrt(u) * params.mix.scale[c]
+    ok = w < params.table.last
+    if not ok:
+        w = 0.0
+    i = int(w)
+    x = (w - i) * params.mix.step[c]
+    k = np.uint64(i)
+    f = ((params.mix.coef[c, k, 0] * x + params.mix.coef[c, k, 1]) * x
+         + params.mix.coef[c, k, 2]) * x + params.mix.coef[c, k, 3]
+    return f, ok
+
+
+@njit(inline="always")
+def force_at(flags, params, j, d):
+    """(f, ok): force of closed contact j at compression d: the one law, or contact j's
+    (``A f(d / L)``)."""
+    if not flags.mixed:
+        return contact_force(flags.exact, flags.hertz, d, params)
+    c = params.mix.cls[j]
+    u = d * params.mix.inv_len[j]
+    if flags.exact or flags.hertz:
+        ok = u < params.delta_max
+        f = law_force(u, flags.hertz, class_law(params.mix, c)) if ok else 0.0
+        return params.mix.force_scale[j] * f, ok
+    f, ok = class_spline(params, c, u)
+    return params.mix.force_scale[j] * f, ok
+
+
+@njit(inline="always")
+def energy_at(flags, params, j, d):
+    """Exact energy of closed contact j at compression d (``A L V(d / L)`` when mixed)."""
+    if not flags.mixed:
+        return law_energy(d, flags.hertz, params.law)
+    e = law_energy(d * params.mix.inv_len[j], flags.hertz, class_law(params.mix,
+                                                                       params.mix.cls[j]))
+    return params.mix.force_scale[j] * params.mix.length[j] * e
+
+
+@njit(inline="always")
+def delta_off_at(params, j):
+    """Opening threshold of contact j (per contact for unlike beads: ``mix.delta_off``)."""
+    return params.mix.delta_off[j] if params.mix.delta_off.shape[0] > 0 else params.delta_off
+
+
+@njit(inline="always")
+def mean_force_at(flags, params, j, d0, d1):
+    """Mean force of contact j over [d0, d1] (:func:`schwarz_mean_force`, scaled)."""
+    if not flags.mixed:
+        return schwarz_mean_force(d0, d1, params.law)
+    il = params.mix.inv_len[j]
+    law = class_law(params.mix, params.mix.cls[j])
+    return params.mix.force_scale[j] * schwarz_mean_force(d0 * il, d1 * il, law)
+
+
 @njit(inline="always")
 def fail(counters, status, j):
     """Stop the run: error ``status`` about contact ``j``."""
@@ -294,12 +398,12 @@ def quantized_switch(flags, params, j, d, x_old, h, t0, ks):
     """locate = False: switch contact j, whose end-of-step compression d is past its
     switching point; the event time is interpolated linearly between the step's ends."""
     closed = ks.closed
-    thr = params.delta_off if closed[j] else 0.0
+    thr = delta_off_at(params, j) if closed[j] else 0.0
     d0 = across(flags.walls, x_old, j) - params.gap
     span = d0 - d
     frac = min(max((d0 - thr) / span if span != 0.0 else 1.0, 0.0), 1.0)
     if closed[j]:
-        ks.counters[0].d_hysteresis += law_energy(d, flags.hertz, params.law)
+        ks.counters[0].d_hysteresis += energy_at(flags, params, j, d)
         closed[j] = False
         record_event(ks, j, t0 + frac * h, 0)
     else:
@@ -308,9 +412,20 @@ def quantized_switch(flags, params, j, d, x_old, h, t0, ks):
 
 
 @njit(cache=True, inline="always")
-def bead_accelerations(f, fv, x, flags, params):
-    """A bead's acceleration from its net contact force ``f`` (and ``fv``, the same with the
-    mean-force kick near snap-off) plus the substrate terms the scene switches on."""
+def bead_accelerations(f, fv, x, i, flags, params):
+    """Bead i's acceleration from its net contact force ``f`` (and ``fv``, the same with the
+    mean-force kick near snap-off) plus the substrate terms the scene switches on (unlike
+    beads: the substrate times ``on_site[i]``, all over the bead's mass)."""
+    if flags.mixed:
+        g = params.mix.on_site[i]
+        if flags.k1_on:
+            f -= g * (params.k1 * x)
+            fv -= g * (params.k1 * x)
+        if flags.k3_on:
+            f -= g * (params.k3 * x * x * x)
+            fv -= g * (params.k3 * x * x * x)
+        im = params.mix.inv_mass[i]
+        return f * im, fv * im
     if flags.k1_on:
         f -= params.k1 * x
         fv -= params.k1 * x
@@ -374,19 +489,22 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
             ve_r = vh_r + hh * a_r
         d = x_c - x_r - gap
         r = ve_c - ve_r
+        if flags.mixed:
+            doff = params.mix.delta_off[j]
         if not flags.locate and quantized_due(closed[j], d, doff):
             quantized_switch(flags, params, np.int64(j), d, xo, h, t0, ks)
         f_r, fv_r = 0.0, 0.0
         if closed[j]:
-            f_r, ok = contact_force(exact, hertz, d, params)
+            f_r, ok = force_at(flags, params, j, d)
             if not ok:
                 fail(counters, OUT_OF_TABLE, np.int64(j))
             fv_r = f_r
             # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
-            if not hertz and d < params.mean_force_below:
+            below = params.mix.mean_below[j] if flags.mixed else params.mean_force_below
+            if not hertz and d < below:
                 d0 = across(walls, xo, np.int64(j)) - gap
-                fv_r = (2.0 * schwarz_mean_force(d0, d, params.law)
-                        - closed_force(exact, hertz, d0, params))
+                fv_r = (2.0 * mean_force_at(flags, params, j, d0, d)
+                        - force_at(flags, params, j, d0)[0])
             if flags.damped:
                 f_r += c * r
                 fv_r += c * r
@@ -403,14 +521,14 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
                     flagged[nflag] = np.int64(j)
                 nflag += 1
         if rb >= one:  # finish the left bead
-            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, flags, params)
+            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, rb - one, flags, params)
             new.x[rb - one] = x_c
             new.a[rb - one] = a
             new.v[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls:  # the last bead has no contact on its right
-        a, av = bead_accelerations(f_l, fv_l, x_c, flags, params)
+        a, av = bead_accelerations(f_l, fv_l, x_c, n - one, flags, params)
         new.x[n - one] = x_c
         new.a[n - one] = a
         new.v[n - one] = vh_c + hh * av
@@ -426,7 +544,7 @@ def event_function(walls, params, j, beads, closed):
     r = across(walls, beads.v, j)
     q = across(walls, beads.a, j)
     if closed[j]:
-        return d - params.delta_off, r, q
+        return d - delta_off_at(params, j), r, q
     return -d, -r, -q
 
 
@@ -436,7 +554,7 @@ def first_root(walls, params, j, old, x_new, closed, h):
     g0, b, q = event_function(walls, params, j, old, closed)
     c = 0.5 * q
     d1 = across(walls, x_new, j) - params.gap
-    g1 = d1 - params.delta_off if closed[j] else -d1
+    g1 = d1 - delta_off_at(params, j) if closed[j] else -d1
     if g0 <= 0.0:  # on its switching point (left alone: moving inward): event if it goes out
         if b < 0.0 or g0 < -STATE_TOL:  # moving out, or beyond it (the state invariant)
             return 0.0
@@ -530,17 +648,17 @@ def switch(flags, params, j, t, beads, ks):
     f_old = 0.0
     f_new = 0.0
     if closed[j]:
-        f_old, ok = contact_force(flags.exact, flags.hertz, d, params)
+        f_old, ok = force_at(flags, params, j, d)
         if flags.damped:
             f_old += c * r
             counters.power -= c * r * r
-        counters.d_hysteresis += law_energy(d, flags.hertz, params.law)
+        counters.d_hysteresis += energy_at(flags, params, j, d)
         closed[j] = False
         record_event(ks, j, t, 0)
     else:
         closed[j] = True
         record_event(ks, j, t, 1)
-        f_new, ok = contact_force(flags.exact, flags.hertz, d, params)
+        f_new, ok = force_at(flags, params, j, d)
         if not ok:
             fail(counters, OUT_OF_TABLE, j)
         if flags.damped:
@@ -549,9 +667,9 @@ def switch(flags, params, j, t, beads, ks):
     left, right = beads_of(flags.walls, j)
     df = f_new - f_old
     if left >= 0:
-        a[left] -= df
+        a[left] -= df * params.mix.inv_mass[left] if flags.mixed else df
     if right < n:
-        a[right] += df
+        a[right] += df * params.mix.inv_mass[right] if flags.mixed else df
     count_switch(ks, j, t)
 
 
@@ -591,15 +709,16 @@ def init_acc(flags, params, beads, ks):
     power = 0.0
     for i in range(n):
         a[i] = 0.0
+        g = params.mix.on_site[i] if flags.mixed else 1.0
         if flags.k1_on:
-            a[i] -= params.k1 * x[i]
+            a[i] -= g * (params.k1 * x[i]) if flags.mixed else params.k1 * x[i]
         if flags.k3_on:
-            a[i] -= params.k3 * x[i] * x[i] * x[i]
+            a[i] -= (g * (params.k3 * x[i] * x[i] * x[i]) if flags.mixed
+                     else params.k3 * x[i] * x[i] * x[i])
     for j in range(closed.shape[0]):
         if not closed[j]:
             continue
-        f, ok = contact_force(flags.exact, flags.hertz,
-                              across(flags.walls, x, j) - params.gap, params)
+        f, ok = force_at(flags, params, j, across(flags.walls, x, j) - params.gap)
         if not ok:
             fail(ks.counters[0], OUT_OF_TABLE, j)
         if flags.damped:
@@ -611,6 +730,9 @@ def init_acc(flags, params, beads, ks):
             a[left] -= f
         if right < n:
             a[right] += f
+    if flags.mixed:
+        for i in range(n):
+            a[i] *= params.mix.inv_mass[i]
     return power
 
 
@@ -731,7 +853,7 @@ def plain(record):
 def named_params(p):
     """:class:`Params` from ``plain(params)``."""
     return Params(p[0], p[1], p[2], p[3], p[4], p[5], p[6], SchwarzConstants(*p[7]),
-                  ForceTable(*p[8]))
+                  ForceTable(*p[8]), Mix(*p[9]))
 
 
 @njit(inline="always")

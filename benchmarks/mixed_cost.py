@@ -1,0 +1,109 @@
+"""Cost per bead-step of the fast backend on a chain of unlike beads against the homogeneous one.
+
+    python benchmarks/mixed_cost.py [--sizes 1e4,1e5,1e6] [--repeats 5] [--rounds 2]
+
+Cases (micro-star's physics, N + 1 beads so that a dimer touches both walls with large beads):
+
+* ``homogeneous`` micro-star as it is (one law, unit masses: the kernel without ``Mix``);
+* ``dimer``       ``beads.pattern = "dimer"``, ratio 0.6: two masses, three law classes (the
+                  wall pairs and the unlike pair), each contact's law scaled (``flags.mixed``);
+* ``density``     every second bead of density 0.3: unit diameters (one law class) but the
+                  mixed kernel all the same (masses per bead).
+
+Each (case, N) runs in a process of its own: set-up and one warm-up frame are not timed, then
+``--repeats`` frames of the same number of steps are (the kernel's wall time per frame,
+``stats["kernel_s"]``, over N x steps).  The cases alternate, ``--rounds`` times, so that a
+change in the machine's load reaches every case alike; medians and spreads (max - min) over
+every timed frame of a case.  Load averages and the busy processes (ps) at the start are
+recorded: the 2 cores may be shared.  Writes benchmarks/results/mixed_cost.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+CASES = {"homogeneous": [], "dimer": [("beads.pattern", "dimer"), ("beads.ratio", 0.6)],
+         "density": "density"}
+
+CHILD = r"""
+import json, sys
+import numpy as np
+from mdgran.backends.fast import FastBackend
+from mdgran.scene import load_scene
+n, repeats, bead_steps = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
+overrides = json.loads(sys.argv[4])
+if overrides == "density":
+    overrides = [["beads.density", [1.0, 0.3] * (n // 2) + [1.0] * (n % 2)]]
+dt = 0.0025
+steps = int(np.clip(bead_steps // n, 20, 400000))
+scene = load_scene("micro-star", [("chain.n", n), ("run.dt", dt),
+                                  ("run.output_interval", steps * dt),
+                                  ("run.duration", (repeats + 1) * steps * dt)]
+                   + [tuple(o) for o in overrides])
+b = FastBackend(scene)
+frames = b.frames()
+next(frames)
+next(frames)  # warm-up frame
+ns = []
+for _ in range(repeats):
+    k0 = b.stats["kernel_s"]
+    next(frames)
+    ns.append((b.stats["kernel_s"] - k0) / (n * steps) * 1e9)
+print(json.dumps({"ns": ns, "steps": steps, "events": b.stats["events"],
+                  "mixed": bool(b.flags.mixed)}))
+"""
+
+
+def run_case(n: int, case: str, repeats: int, bead_steps: float) -> dict:
+    res = subprocess.run([sys.executable, "-c", CHILD, str(n), str(repeats), str(bead_steps),
+                          json.dumps(CASES[case])], capture_output=True, text=True)
+    if res.returncode != 0:
+        raise RuntimeError(f"{case} at N = {n} failed: {res.stderr.strip().splitlines()[-1:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def busy() -> list:
+    out = subprocess.run(["ps", "-eo", "pcpu=,comm="], capture_output=True, text=True).stdout
+    rows = [line.split(None, 1) for line in out.splitlines()]
+    return [r for r in rows if len(r) == 2 and float(r[0]) > 10.0]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1e4,1e5,1e6")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--bead-steps", type=float, default=2e8)
+    ap.add_argument("--out", default=str(HERE / "results" / "mixed_cost.json"))
+    args = ap.parse_args(argv)
+    result = {"benchmark": __doc__.splitlines()[0], "machine": platform.machine(),
+              "cpu_count": os.cpu_count(), "loadavg_before": os.getloadavg(),
+              "busy_processes_before": busy(), "rows": []}
+    for n in (int(float(s)) + 1 for s in args.sizes.split(",")):
+        times = {case: [] for case in CASES}
+        for _ in range(args.rounds):
+            for case in CASES:
+                times[case] += run_case(n, case, args.repeats, args.bead_steps)["ns"]
+        base = float(np.median(times["homogeneous"]))
+        for case, ns in times.items():
+            v = np.asarray(ns)
+            row = {"n": n, "case": case, "ns_per_bead_step_median": float(np.median(v)),
+                   "ns_per_bead_step_spread": float(v.max() - v.min()), "all": v.tolist(),
+                   "ratio_to_homogeneous": float(np.median(v)) / base,
+                   "loadavg": os.getloadavg()}
+            result["rows"].append(row)
+            print(json.dumps({k: row[k] for k in row if k != "all"}), flush=True)
+    result["loadavg_after"] = os.getloadavg()
+    Path(args.out).write_text(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()
