@@ -400,9 +400,9 @@ class LammpsBackend(Backend):
                     raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
                                              step)
                 nev, power, err, where, value = kernel.contact_step(
-                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._coef, self._par,
-                    self._ipar, step, new_step, self._last_step is not None, self._u, self._w,
-                    self._fcon, self._left, self._pairs, npair, nown, self._ev)
+                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap, self._coef,
+                    self._par, self._ipar, step, new_step, self._last_step is not None, self._u,
+                    self._w, self._fcon, self._left, self._pairs, npair, nown, self._ev)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:

@@ -222,18 +222,25 @@ def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev):
 
 
 @njit(inline="always")
-def _displacements(tag, x, v, x0, aprev, nall, par, ipar, use_est, u, w):
+def _displacements(tag, x, v, x0, aprev, nall, par, ipar, use_est, tmap, u, w):
     """Displacement ``u = x - x0`` and velocity estimate ``w = v(t + dt/2) + dt/2 a(t)`` of
-    every owned and ghost atom (walls: 0)."""
-    walls, ntags, dt = ipar[I_WALLS], ipar[I_NTAGS], par[P_DT]
-    for i in range(nall):
-        t = tag[i]
-        if walls and (t == 1 or t == ntags):
-            u[i] = 0.0
-            w[i] = 0.0
-        else:
+    every owned and ghost atom; walls (found through ``tmap``) 0 afterwards, so that the loop
+    tests nothing per atom."""
+    hdt = 0.5 * par[P_DT]
+    if use_est:
+        for i in range(nall):
             u[i] = x[i, 0] - x0[i]
-            w[i] = v[i, 0] + 0.5 * dt * aprev[i] if use_est else v[i, 0]
+            w[i] = v[i, 0] + hdt * aprev[i]
+    else:
+        for i in range(nall):
+            u[i] = x[i, 0] - x0[i]
+            w[i] = v[i, 0]
+    if ipar[I_WALLS]:
+        for t in (1, ipar[I_NTAGS]):
+            i = find(tag, nall, tmap, t)
+            if i >= 0:
+                u[i] = 0.0
+                w[i] = 0.0
 
 
 @njit(inline="always")
@@ -375,14 +382,14 @@ def contact_list(tag, nlocal, nall, closed, tmap, ipar, left, fcon, pairs):
 
 
 @njit(cache=True)
-def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, coef, par, ipar,
-                 step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events):
+def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
+                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events):
     """Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column;
     y, z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
     events.
 
-    ``pairs[:npair]`` (the first ``nown`` of them this rank's own), ``left`` and the zeros of
-    ``fcon`` are those :func:`contact_list` made for the current atoms; ``u, w, fcon``
+    ``tmap``, ``pairs[:npair]`` (the first ``nown`` of them this rank's own), ``left`` and the
+    zeros of ``fcon`` are those :func:`contact_list` made for the current atoms; ``u, w, fcon``
     (``>= nall``) are scratch; ``events`` (``>= nlocal`` rows) receives ``[local index of the
     left atom, kind (1 close, 0 open), time, energy lost]``.  Returns ``(number of events,
     damping power c sum rate^2 over this rank's contacts, error code, its local index, its
@@ -392,7 +399,7 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, coef, 
     not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
     per contact, three times the contact's own work; only an event calls out
     (:func:`_record`)."""
-    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, u, w)
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
     nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed, dprev,
                                                      coef, par, ipar, step, new_step,
                                                      have_last, fcon, events)
