@@ -331,3 +331,39 @@ def test_fast_follows_the_reference_on_mixed_scenes(name):
     assert list(zip(fast.ev_contact, fast.ev_kind)) == list(zip(ref.ev_contact, ref.ev_kind))
     own = 4.0 / 3.0 * np.abs(fast.x - fine.x).max()
     assert 0 < np.abs(fast.x - ref.x).max() < 4.0 * own
+
+
+# ---- analysis of unlike beads --------------------------------------------------------------
+@settings(max_examples=30, deadline=None)
+@given(k=st.lists(st.floats(0.1, 3.0), min_size=5, max_size=5),
+       m=st.lists(st.floats(0.2, 5.0), min_size=4, max_size=4), k1=st.floats(0.0, 0.5))
+def test_cluster_modes_with_masses_solve_the_generalized_problem(k, m, k1):
+    """``modes(..., masses)`` against scipy's generalized eigensolver ``K u = w^2 M u``."""
+    from scipy.linalg import eigh
+
+    from mdgran.analysis.modes import modes, stiffness_matrix
+
+    om, shapes = modes(k, k1, True, True, None, m)
+    w2, u = eigh(stiffness_matrix(k, k1, True, True), np.diag(m))
+    assert om**2 == pytest.approx(w2, rel=1e-10, abs=1e-12)
+    u = u / np.linalg.norm(u, axis=0)
+    assert np.abs(np.abs(np.sum(shapes * u, axis=0)) - 1.0).max() < 1e-8
+
+
+def test_modes_of_a_dimer_cluster_in_a_run_match_its_spectrum():
+    """A small-impulse run of the density dimer: the whole chain is one cluster, and
+    ``cluster_modes_in_run`` gives numpy's frequencies of the dimer (masses 1 and 3)."""
+    from mdgran.analysis.clusters import Cluster
+    from mdgran.analysis.modes import cluster_modes_in_run
+
+    n, k1 = 21, 0.05
+    masses = np.array([1.0, 3.0] * 10 + [1.0])
+    sc = make_scene(chain={"n": n}, contact={"damping": 0.0}, substrate={"k1": k1},
+                    impulse={"velocity": 1e-6, "bead": 11}, beads={"density": list(masses)},
+                    run={"duration": 5.0, "output_interval": 0.25})
+    tr = run(sc, "reference").trajectory
+    k = ContactLaw("schwarz", fc_from_lambda(LAM, "cos")).stiffness(0.0)
+    expected, _ = linear_modes(masses, np.full(n + 1, k), k1)
+    cl = Cluster(first=1, last=n, left_wall=True, right_wall=True)
+    om, _, _ = cluster_modes_in_run(tr, cl, 0.0, 5.0)
+    assert om == pytest.approx(expected, rel=1e-6)

@@ -19,8 +19,12 @@ from scipy.ndimage import maximum_filter1d
 
 
 def kinetic_energy_map(traj) -> np.ndarray:
-    """Per-bead kinetic energy normalized per frame by the largest one [F, n] (0 where all rest)."""
+    """Per-bead kinetic energy normalized per frame by the largest one [F, n] (0 where all rest);
+    ``m_i v_i^2 / 2`` with the beads' masses for unlike beads."""
     e = 0.5 * traj.v ** 2
+    mix = getattr(traj.scene, "mixture", None)
+    if mix is not None:
+        e = e * mix.mass
     top = e.max(axis=1, keepdims=True)
     return np.divide(e, top, out=np.zeros_like(e), where=top > 0)
 

@@ -53,14 +53,22 @@ def stiffness_matrix(k_contacts, k1: float, left_wall: bool = False, right_wall:
 
 
 def modes(k_contacts, k1: float, left_wall: bool = False, right_wall: bool = False,
-          k_substrate=None):
+          k_substrate=None, masses=None):
     """Frequencies ``omega`` [b] (rad per time unit, ascending) and shapes [b, b] (columns).
 
-    A negative eigenvalue (an unstable state) gives a NaN frequency."""
+    A negative eigenvalue (an unstable state) gives a NaN frequency.  ``masses`` [b] (unlike
+    beads): ``M u'' = -K u``, solved as ``M^-1/2 K M^-1/2``; shapes ``M^-1/2 y`` scaled to unit
+    length."""
     kmat = stiffness_matrix(k_contacts, k1, left_wall, right_wall, k_substrate)
     if not np.all(np.isfinite(kmat)):  # a contact off its attached branch: no linear modes
         return np.full(len(kmat), np.nan), np.full(kmat.shape, np.nan)
+    s = None if masses is None else 1.0 / np.sqrt(np.asarray(masses, float))
+    if s is not None:
+        kmat = s[:, None] * kmat * s[None, :]
     w2, shapes = np.linalg.eigh(kmat)
+    if s is not None:
+        shapes = s[:, None] * shapes
+        shapes /= np.linalg.norm(shapes, axis=0)
     tiny = 1e-12 * max(1.0, float(np.max(np.abs(w2))))
     w2 = np.where(np.abs(w2) < tiny, 0.0, w2)
     with np.errstate(invalid="ignore"):
@@ -104,6 +112,13 @@ def cluster_modes_in_run(traj, cluster, t0: float, t1: float):
     c_lo, c_hi = contact_columns([lo, hi], model.walls)
     comp = delta[c_lo: c_hi + 1]
     x = xm[cluster.first - 1: cluster.last]
+    if model.mixed:  # unlike beads: each contact's own stiffness, the beads' masses
+        mix = model.mixture
+        kc = mix.stiffness(comp, np.arange(c_lo, c_hi + 1))
+        ks = mix.substrate[cluster.first - 1: cluster.last] * (model.k1 + 3.0 * model.k3 * x**2)
+        om, sh = modes(kc, model.k1, cluster.left_wall, cluster.right_wall, ks,
+                       mix.mass[cluster.first - 1: cluster.last])
+        return om, sh, comp
     om, sh = cluster_modes(model.law, comp, model.k1, cluster.left_wall, cluster.right_wall,
                            model.k3, x)
     return om, sh, comp
