@@ -84,6 +84,7 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 static constexpr int NEWTON_STEPS = 7;    // as mdgran/contact.py
+static constexpr int T_BLOCK = 16;        // compressions inverted together (t_of_delta_n)
 static constexpr int NPERATOM = 4;        // stored in restart files: x0, closed, dprev, aprev
 static constexpr int NEXCHANGE = 6;       // migrate with the atom: those, and xs, vs (located)
 // located events (as mdgran/backends/fast_kernel.py)
@@ -275,14 +276,29 @@ void FixMdgranChain::init()
 // phi(w) = w sqrt(w^2 + 4 tm w + 6 tm^2) = sqrt(delta - delta_min), w = t - tm, from above.
 double FixMdgranChain::t_of_delta(double d) const
 {
-  double rhs = std::sqrt(std::max(d - delta_min, 0.0));
-  if (tm == 0.0) return std::sqrt(rhs);    // DMT: phi(w) = w^2
-  double w = std::min(rhs / sqrt_big, std::sqrt(rhs));
-  for (int it = 0; it < NEWTON_STEPS; it++) {
-    double sq = std::sqrt(w * w + 4.0 * tm * w + big);
-    w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq);
+  double t;
+  t_of_delta_n(&d, &t, 1);
+  return t;
+}
+
+// t_of_delta of n <= T_BLOCK compressions at once, each with the same operations: the Newton
+// steps of the n values interleave (one value's steps are a chain of dependent square roots
+// and divisions; the contact energy of 1e5 contacts took 17 ms one by one)
+void FixMdgranChain::t_of_delta_n(const double *d, double *t, int n) const
+{
+  double rhs[T_BLOCK], w[T_BLOCK];
+  for (int j = 0; j < n; j++) rhs[j] = std::sqrt(std::max(d[j] - delta_min, 0.0));
+  if (tm == 0.0) {    // DMT: phi(w) = w^2
+    for (int j = 0; j < n; j++) t[j] = std::sqrt(rhs[j]);
+    return;
   }
-  return tm + std::max(w, 0.0);
+  for (int j = 0; j < n; j++) w[j] = std::min(rhs[j] / sqrt_big, std::sqrt(rhs[j]));
+  for (int it = 0; it < NEWTON_STEPS; it++)
+    for (int j = 0; j < n; j++) {
+      double sq = std::sqrt(w[j] * w[j] + 4.0 * tm * w[j] + big);
+      w[j] = w[j] - (w[j] * sq - rhs[j]) / (sq + w[j] * (w[j] + 2.0 * tm) / sq);
+    }
+  for (int j = 0; j < n; j++) t[j] = tm + std::max(w[j], 0.0);
 }
 
 double FixMdgranChain::exact_force(double d) const
@@ -1094,13 +1110,22 @@ double FixMdgranChain::compute_scalar()
   double e = 0.0;
   const int nlocal = atom->nlocal;
   ntags = (tagint) atom->natoms;
+  std::vector<double> deltas;    // of the closed contacts, in order
   for (int i = 0; i < nlocal; i++) {
     if (closed[i] == 0.0 || atom->tag[i] >= (tagint) atom->natoms) continue;
     int j = atom->map(atom->tag[i] + 1);
     if (j < 0) continue;
     double delta = disp(i) - disp(j);
     if (gap != 0.0) delta = delta - gap;
-    e += law_energy(delta);
+    deltas.push_back(delta);
+  }
+  // e += law_energy(delta) in that order, the branch parameters T_BLOCK at a time
+  double t[T_BLOCK];
+  for (size_t b = 0; b < deltas.size(); b += T_BLOCK) {
+    const int n = (int) std::min<size_t>(T_BLOCK, deltas.size() - b);
+    if (!hertz) t_of_delta_n(&deltas[b], t, n);
+    for (int k = 0; k < n; k++)
+      e += hertz ? law_energy(deltas[b + k]) : antiderivative(t[k]) - p_t0;
   }
   if (located)    // the substrate is this fix's too: k1 u^2 / 2 + k3 u^4 / 4
     for (int i = 0; i < nlocal; i++) {

@@ -153,6 +153,7 @@ class FixMdgranChain : public Fix {
   static double *flat(double **a) { return a ? a[0] : nullptr; }
 
   double t_of_delta(double delta) const;
+  void t_of_delta_n(const double *delta, double *t, int n) const;
   double antiderivative(double t) const;
   void read_table(const char *file);
   void compute(bigint step);
