@@ -94,3 +94,19 @@ def test_wrong_snap_off_fails_cluster_statistics(test_backends):
     stats = [c for c in rep["criteria"] if c["name"].startswith("cluster ")]
     assert len(stats) == 2 and all(c["judged"] for c in stats)
     assert not all(c["passed"] for c in stats)
+
+
+def test_an_unmatched_event_is_excused_only_when_undecidable():
+    """A surplus close of contact 3 at t = 2 is a disagreement, unless the grazing test says
+    the other backend came within its error of that switch (then it is counted apart)."""
+    from mdgran.compare import compare_events
+
+    ta, sa = [1.0, 2.0], [(3, 0), (3, 1)]
+    tb, sb = [1.0], [(3, 0)]
+    seen = []
+    ev = compare_events(ta, sa, tb, sb, 10.0, 0.01,
+                        lambda *r: seen.append(r) or False)
+    assert ev["disagreement"] is not None and ev["undecidable"] == 0
+    assert seen == [(2.0, 3, 1, "first", 0.01)]
+    ev = compare_events(ta, sa, tb, sb, 10.0, 0.01, lambda *r: True)
+    assert ev["disagreement"] is None and ev["undecidable"] == 1

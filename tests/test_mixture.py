@@ -367,3 +367,16 @@ def test_modes_of_a_dimer_cluster_in_a_run_match_its_spectrum():
     cl = Cluster(first=1, last=n, left_wall=True, right_wall=True)
     om, _, _ = cluster_modes_in_run(tr, cl, 0.0, 5.0)
     assert om == pytest.approx(expected, rel=1e-6)
+
+
+@pytest.mark.parametrize("name", ["mixed/dimer", "mixed/intruder"])
+def test_compare_passes_reference_against_fast_on_mixed_scenes(name, tmp_path):
+    """``mdgran compare`` of reference and fast on the dimer and intruder scenes to t = 60:
+    trajectories within the error estimates to the horizon, events matched (or undecidable
+    at the backends' accuracy), ledgers within bounds, cluster statistics past the horizon."""
+    from mdgran.compare import compare
+
+    rep = compare(load_scene(name, [("run.duration", 60.0)]), ("reference", "fast"),
+                  out_dir=tmp_path)
+    failed = [c for c in rep["criteria"] if not c["passed"]]
+    assert not failed, failed
