@@ -111,6 +111,9 @@ class ChainModel:
     k3: float = 0.0
     gap: float = 0.0
     mixture: Mixture | None = field(default=None, compare=False)
+    substrate_damping: float = 0.0  # c_s: force -c_s v on each bead on the substrate
+    temperature: float = 0.0  # initial random velocities, variance temperature / m_i
+    seed: int = 0  # of those velocities
     walls: bool = field(init=False)
 
     def __post_init__(self):
@@ -195,31 +198,48 @@ class ChainModel:
             f = f + self.damping * self.differences(v)
         return np.where(closed, f, 0.0)
 
-    def substrate_force(self, x):
+    def substrate_force(self, x, v=None):
+        """``-g_i (k1 x_i + k3 x_i^3 + c_s v_i)`` [n] (``c_s`` with ``v`` given), or None
+        when the scene has no substrate term."""
+        s = None
         if self.k3:
             s = -(self.k1 + self.k3 * x * x) * x
         elif self.k1:
             s = -self.k1 * x
-        else:
-            return None
-        if self.mixture is not None and self.mixture.free_beads:
+        if self.substrate_damping and v is not None:
+            s = -self.substrate_damping * v if s is None else s - self.substrate_damping * v
+        if s is not None and self.mixture is not None and self.mixture.free_beads:
             s = self.mixture.substrate * s
         return s
 
+    def free_acceleration(self, x, v):
+        """Acceleration with every contact open: the substrate alone (over the masses)."""
+        s = self.substrate_force(x, v)
+        if s is None:
+            return np.zeros(self.n)
+        return self._per_mass(s)
+
+    def _per_mass(self, force):
+        if self.mixture is not None and not self.mixture.uniform_mass:
+            return force / self.mixture.mass
+        return force
+
     def acceleration(self, x, v, closed):
         a = self._apply(self.contact_forces(x, v, closed))
-        s = self.substrate_force(x)
-        a = a if s is None else a + s
-        if self.mixture is not None and not self.mixture.uniform_mass:
-            a = a / self.mixture.mass
-        return a
+        s = self.substrate_force(x, v)
+        return self._per_mass(a if s is None else a + s)
 
     def viscous_power(self, v, closed):
-        """Rate of viscous dissipation, ``sum_closed c (d delta/dt)^2``."""
-        if not self.damping:
-            return 0.0
-        dv = self.differences(v)
-        return self.damping * float(np.sum(np.where(closed, dv * dv, 0.0)))
+        """Rate of viscous dissipation, ``sum_closed c (d delta/dt)^2`` plus the substrate's
+        ``sum_i g_i c_s v_i^2``."""
+        p = 0.0
+        if self.damping:
+            dv = self.differences(v)
+            p = self.damping * float(np.sum(np.where(closed, dv * dv, 0.0)))
+        if self.substrate_damping:
+            g = 1.0 if self.mixture is None else self.mixture.substrate
+            p += self.substrate_damping * float(np.sum(g * v * v))
+        return p
 
     # ---- energy ledger ---------------------------------------------------------------------
     def kinetic_energy(self, v) -> float:
@@ -349,9 +369,18 @@ class ChainModel:
         x = np.zeros(self.n)
         if self.mixture is not None and self.walls and states.all():
             x = self.equilibrium.copy()
-        v = np.zeros(self.n)
-        v[bead - 1] = velocity
+        v = self.thermal_velocities()
+        v[bead - 1] += velocity
         return x, v, states
+
+    def thermal_velocities(self) -> np.ndarray:
+        """Initial random velocities [n]: ``v_i = sqrt(temperature / m_i) N_i``, ``N_i``
+        standard normal from numpy's ``default_rng(seed)`` (each bead's mean kinetic energy
+        ``temperature / 2``, units eta p); zeros at temperature 0."""
+        if not self.temperature:
+            return np.zeros(self.n)
+        normal = np.random.default_rng(self.seed).standard_normal(self.n)
+        return np.sqrt(self.temperature / self.masses) * normal
 
     @cached_property
     def equilibrium(self) -> np.ndarray:
@@ -416,4 +445,7 @@ def model_from_scene(scene) -> "ChainModel":
         k3=float(d["substrate"]["k3"]),
         gap=float(d["chain"]["initial_gap"]),
         mixture=scene.mixture,
+        substrate_damping=float(d["substrate"]["damping"]),
+        temperature=float(d["thermal"]["temperature"]),
+        seed=int(d["thermal"]["seed"]),
     )

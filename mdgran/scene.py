@@ -88,6 +88,8 @@ LIMITS = {
     "material.density": (1.0, 1e5),
     "material.D0": (1e-12, 1e-6),
     "beads.spread": (0.0, 0.9),
+    "substrate.damping": (0.0, 1e3),
+    "thermal.temperature": (0.0, 1e6),
 }
 
 class Key(NamedTuple):
@@ -147,6 +149,10 @@ SCHEMA = {
                   "linear substrate stiffness K1_hat"),
         "k3": Key(0.0, "float>=0", f"a number in [0, 1e6] {_FREQ}", "eta / p^3",
                   "cubic substrate stiffness K3_hat"),
+        "damping": Key(0.0, "float>=0", "a number in [0, 1e3] (heavier damping needs steps "
+                       "below 1e-3 time units)", "sqrt(m eta / p)",
+                       "viscous damping of each bead on the substrate, force -c_s v (its "
+                       "dissipation is counted in dissipated_viscous); 0: none"),
         "k1_si": Key(None, "float>=0?", "a finite number >= 0 in N/m (needs [material])",
                      "N/m", "substrate.k1 in SI (needs [material])"),
         "k3_si": Key(None, "float>=0?", "a finite number >= 0 in N/m^3 (needs [material])",
@@ -249,6 +255,14 @@ SCHEMA = {
                         "chain.boundary = 'free' and impulse.bead = 1)", "no striker"),
         "density": Key(None, "ratio?", f"a number in {_RATIO}", "rho0",
                        "the striker's density over the reference bead's", "1 (with a striker)"),
+    },
+    "thermal": {
+        "temperature": Key(0.0, "float>=0", "a number in [0, 1e6]", "eta p",
+                           "initial random velocities v_i = sqrt(temperature / m_i) N(0, 1), "
+                           "added to the impulse: each bead's mean kinetic energy "
+                           "temperature / 2; 0: none"),
+        "seed": Key(0, "int>=0", "an integer >= 0", "", "seed of those velocities (numpy's "
+                    "default_rng)"),
     },
     "meta": {
         "description": Key("", "str", "a string", "", "what the scene is; first line is listed "

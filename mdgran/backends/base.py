@@ -102,6 +102,25 @@ class LedgerBlock:
         return self._rows[k]
 
 
+def scene_features(scene, model) -> list:
+    """``(feature, key, what)`` of each feature beyond the paper's chain that the scene uses:
+    ``"mixture"`` (unlike beads or a striker), ``"thermal"`` (initial random velocities),
+    ``"substrate damping"``."""
+    out = []
+    if model.mixed:
+        key = "striker.diameter" if scene.data["striker"]["diameter"] is not None else "beads"
+        out.append(("mixture", key, "chains of unlike beads ([beads], [striker])"))
+    if model.temperature:
+        out.append(("thermal", "thermal.temperature", "initial random velocities"))
+    if model.substrate_damping:
+        out.append(("substrate damping", "substrate.damping", "substrate damping"))
+    return out
+
+
+#: every feature of :func:`scene_features`
+ALL_FEATURES = frozenset({"mixture", "thermal", "substrate damping"})
+
+
 class Backend:
     """Base class: holds the scene and model; subclasses implement :meth:`frames`."""
 
@@ -109,9 +128,9 @@ class Backend:
     #: every option the backend's constructor takes (``run(scene, name, **options)``); others
     #: are rejected.  The default is the reference's: its adaptive ``tolerance``.
     accepted_options: tuple = ("tolerance",)
-    #: True for a backend that runs chains of unlike beads (``[beads]``, ``[striker]``: a
-    #: :class:`~mdgran.mixture.Mixture`); the others refuse such a scene before running
-    runs_mixtures: bool = False
+    #: the scene features beyond the paper's chain (:func:`scene_features`) that the backend
+    #: runs; it refuses a scene with any other before running
+    supports: frozenset = frozenset()
 
     def __init__(self, scene, **options):
         from ..chain import model_from_scene
@@ -123,11 +142,11 @@ class Backend:
                              + (", ".join(self.accepted_options) or "none"))
         self.scene = scene
         self.model = model_from_scene(scene)
-        if self.model.mixed and not self.runs_mixtures:
-            key = "striker.diameter" if scene.data["striker"]["diameter"] is not None \
-                else "beads"
-            raise SceneError(key, f"backend {self.name!r} does not run chains of unlike beads "
-                             "([beads], [striker]) yet; the reference backend does")
+        missing = [f for f in scene_features(scene, self.model) if f[0] not in self.supports]
+        if missing:
+            feature, key, what = missing[0]
+            raise SceneError(key, f"backend {self.name!r} does not run {what} yet; the "
+                             "reference and fast backends do")
         if self.model.mixed:  # refused here, before a run, if the chain has no equilibrium
             self.model.initial_state(1, 0.0)
         self.options = options

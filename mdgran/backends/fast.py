@@ -46,7 +46,8 @@ from ..contact import ContactTable
 from ..contact_scalar import schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
-from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError, LedgerBlock
+from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
+                   LedgerBlock)
 
 EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
@@ -65,7 +66,7 @@ class FastBackend(Backend):
     #: paper-robustness sweep at dt = 0.0025, largest at v0 = 64; built-in and hard scenes
     #: 1.4-3.3), up to 1.0 step-quantized (hard/jkr-force at dt = 0.01): 3.5x and 4x margins
     ledger_c = {2: 15.0, 1: 4.0}
-    runs_mixtures = True
+    supports = ALL_FEATURES
 
     def __init__(self, scene, locate_events: bool = True, contact_eval: str = "table",
                  table_points: int | None = None, delta_max: float = 100.0, **options):
@@ -96,11 +97,12 @@ class FastBackend(Backend):
             delta_off=float(law.delta_off), delta_max=self.table.delta_max,
             mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
             law=schwarz_constants(law), table=table,
-            mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max))
+            mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max),
+            sub_damping=float(m.substrate_damping))
         self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
                               k3_on=m.k3 != 0.0, locate=self.locate,
                               exact=contact_eval == "exact", hertz=law.kind == "hertz",
-                              mixed=m.mixture is not None)
+                              mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0)
         self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),

@@ -99,6 +99,7 @@ class Flags(NamedTuple):
     exact: bool  # the exact law instead of the force table
     hertz: bool  # the Hertz law (else Schwarz)
     mixed: bool = False  # unlike beads: per-bead masses, per-contact laws (:class:`Mix`)
+    sub_damped: bool = False  # substrate damping force -c_s v on the beads
 
 
 class ForceTable(NamedTuple):
@@ -157,6 +158,7 @@ class Params(NamedTuple):
     law: SchwarzConstants
     table: ForceTable
     mix: Mix  # unlike beads (flags.mixed); no_mix() otherwise
+    sub_damping: float = 0.0  # c_s (flags.sub_damped)
 
 
 class Beads(NamedTuple):
@@ -412,10 +414,17 @@ def quantized_switch(flags, params, j, d, x_old, h, t0, ks):
 
 
 @njit(cache=True, inline="always")
-def bead_accelerations(f, fv, x, i, flags, params):
+def bead_accelerations(f, fv, x, ve, i, flags, params):
     """Bead i's acceleration from its net contact force ``f`` (and ``fv``, the same with the
     mean-force kick near snap-off) plus the substrate terms the scene switches on (unlike
-    beads: the substrate times ``on_site[i]``, all over the bead's mass)."""
+    beads: the substrate times ``on_site[i]``, all over the bead's mass); ``ve`` the bead's
+    velocity estimate at the step's end, for the substrate damping ``-c_s v``."""
+    if flags.sub_damped:
+        fd = params.sub_damping * ve
+        if flags.mixed:
+            fd *= params.mix.on_site[i]
+        f -= fd
+        fv -= fd
     if flags.mixed:
         g = params.mix.on_site[i]
         if flags.k1_on:
@@ -433,6 +442,13 @@ def bead_accelerations(f, fv, x, i, flags, params):
         f -= params.k3 * x * x * x
         fv -= params.k3 * x * x * x
     return f, fv
+
+
+@njit(inline="always")
+def substrate_power(v, i, flags, params):
+    """Dissipation rate of the substrate damping on bead i, ``g_i c_s v^2``."""
+    p = params.sub_damping * v * v
+    return p * params.mix.on_site[i] if flags.mixed else p
 
 
 @njit(inline="always")
@@ -521,14 +537,19 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
                     flagged[nflag] = np.int64(j)
                 nflag += 1
         if rb >= one:  # finish the left bead
-            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, rb - one, flags, params)
+            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, rb - one, flags,
+                                       params)
+            if flags.sub_damped:
+                power += substrate_power(ve_c, rb - one, flags, params)
             new.x[rb - one] = x_c
             new.a[rb - one] = a
             new.v[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls:  # the last bead has no contact on its right
-        a, av = bead_accelerations(f_l, fv_l, x_c, n - one, flags, params)
+        a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params)
+        if flags.sub_damped:
+            power += substrate_power(ve_c, n - one, flags, params)
         new.x[n - one] = x_c
         new.a[n - one] = a
         new.v[n - one] = vh_c + hh * av
@@ -709,6 +730,10 @@ def init_acc(flags, params, beads, ks):
     power = 0.0
     for i in range(n):
         a[i] = 0.0
+        if flags.sub_damped:
+            power += substrate_power(v[i], i, flags, params)
+            a[i] -= (params.mix.on_site[i] * (params.sub_damping * v[i]) if flags.mixed
+                     else params.sub_damping * v[i])
         g = params.mix.on_site[i] if flags.mixed else 1.0
         if flags.k1_on:
             a[i] -= g * (params.k1 * x[i]) if flags.mixed else params.k1 * x[i]
@@ -853,7 +878,7 @@ def plain(record):
 def named_params(p):
     """:class:`Params` from ``plain(params)``."""
     return Params(p[0], p[1], p[2], p[3], p[4], p[5], p[6], SchwarzConstants(*p[7]),
-                  ForceTable(*p[8]), Mix(*p[9]))
+                  ForceTable(*p[8]), Mix(*p[9]), p[10])
 
 
 @njit(inline="always")

@@ -62,8 +62,8 @@ import numpy as np
 from scipy.integrate import DOP853
 from scipy.optimize import brentq
 
-from .base import (CLOSE, LEDGER_TOL_FLOOR, LEDGER_TOL_MULTIPLE, LEDGER_TOL_TIME, OPEN, Backend,
-                   Event, Frame, IntegrationError)
+from .base import (ALL_FEATURES, CLOSE, LEDGER_TOL_FLOOR, LEDGER_TOL_MULTIPLE, LEDGER_TOL_TIME,
+                   OPEN, Backend, Event, Frame, IntegrationError)
 
 MAX_SWITCHES_AT_ONE_INSTANT = 4
 SIMULTANEOUS = 1e-12
@@ -119,7 +119,7 @@ class ReferenceBackend(Backend):
     """Event-driven DOP853 integration at ``run.tolerance``; the accuracy oracle."""
 
     name = "reference"
-    runs_mixtures = True
+    supports = ALL_FEATURES
 
     def __init__(self, scene, **options):
         super().__init__(scene, **options)
@@ -166,8 +166,7 @@ class ReferenceBackend(Backend):
             if any_closed:
                 out[n:2 * n] = m.acceleration(x, v, closed)
             else:
-                s = m.substrate_force(x)
-                out[n:2 * n] = 0.0 if s is None else s
+                out[n:2 * n] = m.free_acceleration(x, v)
             out[2 * n] = m.viscous_power(v, closed)
             return out
 
