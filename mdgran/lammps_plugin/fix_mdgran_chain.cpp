@@ -426,8 +426,8 @@ void FixMdgranChain::compute(bigint step)
   double *const dprev_ = dprev, *const aprev_ = aprev;
   const double *const x0_ = x0, *const xf = flat(x), *const vf = flat(v);
   const double gap_ = gap, damping_ = damping, delta_off_ = delta_off, hdt = 0.5 * dt;
-  if (use_est)
-    for (int i = 0; i < nall; i++) {
+  if (use_est)    // owned atoms: left by integrate yes's first half (nve), if it ran
+    for (int i = drift_h == dt ? nlocal : 0; i < nall; i++) {
       u_[i] = xf[3 * i] - x0_[i];
       w_[i] = vf[3 * i] + hdt * aprev_[i];
     }
@@ -437,6 +437,7 @@ void FixMdgranChain::compute(bigint step)
       w_[i] = vf[3 * i];
     }
   for (int i : wall_atoms) u_[i] = w_[i] = 0.0;
+  drift_h = -1.0;
 
   // a switch of contact l at this step (rare): its event time and lost energy, on the owner
   auto record = [&](int l, double delta, int opening) __attribute__((noinline)) {
@@ -1016,7 +1017,8 @@ void FixMdgranChain::final_integrate()
 // along x (the chain has no y or z velocity or force), with fix nve's operations, so that the
 // run is bitwise the run with fix nve: v += dtf/m f, then (first half) x += dt v.  One loop over
 // the moving atoms each half, without fix nve's mask test and y, z components (~2 ns per
-// bead-step less at N = 1e5).
+// bead-step less at N = 1e5).  The first half also leaves the owned atoms' u and w for this
+// step's compute (drift_h = dt), the numbers it would compute from x and v (as drift does).
 void FixMdgranChain::nve(int first)
 {
   if (contacts_stale) build_contacts();    // runs are those of the current atoms
@@ -1024,13 +1026,27 @@ void FixMdgranChain::nve(int first)
   const double *f = flat(atom->f);
   const double *rmass = atom->rmass, *mass = atom->mass;
   const int *type = atom->type;
-  const double dtv = update->dt, dtf = 0.5 * update->dt * force->ftm2v;
+  double *const u_ = u, *const w_ = w;    // members as locals (see located_pass)
+  const double *const x0_ = x0, *const aprev_ = aprev;
+  const double dtv = update->dt, dtf = 0.5 * update->dt * force->ftm2v, hdt = 0.5 * dtv;
   for (size_t r = 0; r < runs.size(); r += 2)
     for (int i = runs[r]; i < runs[r + 1]; i++) {
       double dtfm = rmass ? dtf / rmass[i] : dtf / mass[type[i]];
-      v[3 * i] += dtfm * f[3 * i];
-      if (first) x[3 * i] += dtv * v[3 * i];
+      double vi = v[3 * i] + dtfm * f[3 * i];
+      v[3 * i] = vi;
+      if (first) {
+        double xi = x[3 * i] + dtv * vi;
+        x[3 * i] = xi;
+        u_[i] = xi - x0_[i];
+        w_[i] = vi + hdt * aprev_[i];
+      }
     }
+  if (!first) return;
+  for (int i : still) {
+    u_[i] = x[3 * i] - x0_[i];
+    w_[i] = v[3 * i] + hdt * aprev_[i];
+  }
+  drift_h = dtv;
 }
 
 // Set-up of a run: at the first one, settle every contact and compute a(0) and P(0) with the
