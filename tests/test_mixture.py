@@ -386,3 +386,21 @@ def test_compare_passes_reference_against_fast_on_mixed_scenes(name, tmp_path):
                   out_dir=tmp_path)
     failed = [c for c in rep["criteria"] if not c["passed"]]
     assert not failed, failed
+
+
+def test_fast_with_one_law_per_pair_needs_the_exact_law():
+    """Random diameters with contact.lambda give every pair its own law: more than the fast
+    backend tabulates is refused (the key, what to do), and the exact law runs it, close to the
+    reference."""
+    sc = load_scene("micro-star", [("chain.n", 300), ("chain.boundary", "free"),
+                                   ("beads.pattern", "random"),
+                                   ("beads.spread", 0.2), ("run.duration", 2.0),
+                                   ("run.tolerance", 1e-10)])
+    assert len(sc.mixture.laws) > 255
+    with pytest.raises(SceneError) as err:
+        run(sc, "fast")
+    assert err.value.key == "beads" and "contact_eval=exact" in str(err.value)
+    fast = run(sc, "fast:contact_eval=exact").trajectory
+    ref = run(sc, "reference").trajectory
+    assert list(zip(fast.ev_contact, fast.ev_kind)) == list(zip(ref.ev_contact, ref.ev_kind))
+    assert np.abs(fast.x - ref.x).max() < 1e-5 * np.abs(ref.x).max()  # dt 0.0025, order 2

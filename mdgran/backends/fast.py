@@ -55,6 +55,11 @@ EVENT_BUFFER = 65536
 BLOCK_BEAD_STEPS = 1_000_000
 
 
+#: distinct pair laws whose force tables the fast backend holds (unlike beads); more (random
+#: diameters with contact.lambda: one law per pair) need the exact law
+MAX_LAW_TABLES = 255
+
+
 class FastBackend(Backend):
     """Fixed-step velocity Verlet with located (or step-quantized) contact events."""
 
@@ -92,6 +97,7 @@ class FastBackend(Backend):
                               float(self.table.base), float(self.table._scale),
                               float(self.table.n - 1), float(self.table._h))
         singular = law.kind == "schwarz" and law.snap_off == "displacement" and law.t_min > 0.0
+        self.flags_exact = contact_eval == "exact"
         self.params = fk.Params(
             gap=float(m.gap), damping=float(m.damping), k1=float(m.k1), k3=float(m.k3),
             delta_off=float(law.delta_off), delta_max=self.table.delta_max,
@@ -102,7 +108,8 @@ class FastBackend(Backend):
         self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
                               k3_on=m.k3 != 0.0, locate=self.locate,
                               exact=contact_eval == "exact", hertz=law.kind == "hertz",
-                              mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0)
+                              mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0,
+                              off_substrate=m.mixture is not None and m.mixture.free_beads)
         self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
@@ -116,18 +123,23 @@ class FastBackend(Backend):
         a force table of ``points`` nodes to ``delta_max`` (own units) per distinct law."""
         mix = self.model.mixture
         laws = mix.laws
-        tables = [ContactTable(law, points, delta_max) for law in laws]
+        if len(laws) > MAX_LAW_TABLES and not self.flags_exact:
+            raise SceneError("beads", f"{len(laws)} distinct pair laws (each pair's lambda "
+                             "follows its size): the fast backend tabulates at most "
+                             f"{MAX_LAW_TABLES}; run it with the exact law "
+                             "('fast:contact_eval=exact'), or give contact.fc (one law)")
+        tables = [ContactTable(law, points, delta_max)
+                  for law in (laws if not self.flags_exact else laws[:1])]
         length = np.ascontiguousarray(mix.length_scale, dtype=float)
-        own_below = np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
-                              and law.snap_off == "displacement" and law.t_min > 0.0
-                              else -math.inf for law in laws])
         return fk.Mix(
             inv_mass=1.0 / mix.mass, on_site=np.ascontiguousarray(mix.substrate, dtype=float),
             force_scale=np.ascontiguousarray(mix.force_scale, dtype=float),
             inv_len=1.0 / length, length=length,
             delta_off=np.ascontiguousarray(mix.delta_off, dtype=float),
-            mean_below=length * own_below[mix.law_index],
-            cls=np.ascontiguousarray(mix.law_index, dtype=np.int64),
+            cls=np.ascontiguousarray(mix.law_index, dtype=np.uint32),
+            below=np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
+                            and law.snap_off == "displacement" and law.t_min > 0.0
+                            else -math.inf for law in laws]),
             laws=np.array([tuple(schwarz_constants(law)) for law in laws], dtype=float),
             coef=np.ascontiguousarray(np.stack([t.f_coef for t in tables]), dtype=float),
             base=np.array([t.base for t in tables], dtype=float),

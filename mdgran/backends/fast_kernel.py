@@ -100,6 +100,7 @@ class Flags(NamedTuple):
     hertz: bool  # the Hertz law (else Schwarz)
     mixed: bool = False  # unlike beads: per-bead masses, per-contact laws (:class:`Mix`)
     sub_damped: bool = False  # substrate damping force -c_s v on the beads
+    off_substrate: bool = False  # (mixed) some bead is off the substrate: Mix.on_site is read
 
 
 class ForceTable(NamedTuple):
@@ -129,8 +130,8 @@ class Mix(NamedTuple):
     inv_len: np.ndarray  # [m] 1 / L
     length: np.ndarray  # [m] L
     delta_off: np.ndarray  # [m] L * delta_off of the class (units p)
-    mean_below: np.ndarray  # [m] L * (delta_min + SING_BAND), or -inf (no mean-force kick)
-    cls: np.ndarray  # [m] int64
+    cls: np.ndarray  # [m] uint32: the contact's law class
+    below: np.ndarray  # [classes] own delta_min + SING_BAND, or -inf (no mean-force kick)
     laws: np.ndarray  # [classes, 5]
     coef: np.ndarray  # [classes, nodes - 1, 4]
     base: np.ndarray  # [classes]
@@ -141,7 +142,7 @@ class Mix(NamedTuple):
 def no_mix() -> Mix:
     """The :class:`Mix` of a homogeneous chain: empty arrays (never read)."""
     e = np.zeros(0)
-    return Mix(e, e, e, e, e, e, e, np.zeros(0, dtype=np.int64), np.zeros((0, 5)),
+    return Mix(e, e, e, e, e, e, np.zeros(0, dtype=np.uint32), e, np.zeros((0, 5)),
                np.zeros((0, 0, 4)), e, e, e)
 
 
@@ -421,12 +422,12 @@ def bead_accelerations(f, fv, x, ve, i, flags, params):
     velocity estimate at the step's end, for the substrate damping ``-c_s v``."""
     if flags.sub_damped:
         fd = params.sub_damping * ve
-        if flags.mixed:
+        if flags.off_substrate:
             fd *= params.mix.on_site[i]
         f -= fd
         fv -= fd
     if flags.mixed:
-        g = params.mix.on_site[i]
+        g = params.mix.on_site[i] if flags.off_substrate else 1.0
         if flags.k1_on:
             f -= g * (params.k1 * x)
             fv -= g * (params.k1 * x)
@@ -448,7 +449,7 @@ def bead_accelerations(f, fv, x, ve, i, flags, params):
 def substrate_power(v, i, flags, params):
     """Dissipation rate of the substrate damping on bead i, ``g_i c_s v^2``."""
     p = params.sub_damping * v * v
-    return p * params.mix.on_site[i] if flags.mixed else p
+    return p * params.mix.on_site[i] if flags.off_substrate else p
 
 
 @njit(inline="always")
@@ -516,8 +517,11 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
                 fail(counters, OUT_OF_TABLE, np.int64(j))
             fv_r = f_r
             # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
-            below = params.mix.mean_below[j] if flags.mixed else params.mean_force_below
-            if not hertz and d < below:
+            if flags.mixed:  # the class's band, in the contact's own units
+                near = (d * params.mix.inv_len[j] < params.mix.below[params.mix.cls[j]])
+            else:
+                near = d < params.mean_force_below
+            if not hertz and near:
                 d0 = across(walls, xo, np.int64(j)) - gap
                 fv_r = (2.0 * mean_force_at(flags, params, j, d0, d)
                         - force_at(flags, params, j, d0)[0])
