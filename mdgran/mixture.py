@@ -80,11 +80,12 @@ class Mixture:
     def hertz(self) -> bool:
         return self.law.kind == "hertz"
 
-    @property
+    @cached_property
     def uniform_mass(self) -> bool:
+        """True when every bead has the reference mass (no division by the masses)."""
         return bool(np.all(self.mass == 1.0))
 
-    @property
+    @cached_property
     def free_beads(self) -> bool:
         """True when some bead is off the substrate."""
         return bool(np.any(self.substrate != 1.0))

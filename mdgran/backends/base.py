@@ -144,7 +144,7 @@ class Backend:
         self.model = model_from_scene(scene)
         missing = [f for f in scene_features(scene, self.model) if f[0] not in self.supports]
         if missing:
-            feature, key, what = missing[0]
+            _, key, what = missing[0]
             raise SceneError(key, f"backend {self.name!r} does not run {what} yet; the "
                              "reference and fast backends do")
         if self.model.mixed:  # refused here, before a run, if the chain has no equilibrium
