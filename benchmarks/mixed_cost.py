@@ -12,7 +12,8 @@ Cases (micro-star's physics, N + 1 beads so that a dimer touches both walls with
 
 Each (case, N) runs in a process of its own: set-up and one warm-up frame are not timed, then
 ``--repeats`` frames of the same number of steps are (the kernel's wall time per frame,
-``stats["kernel_s"]``, over N x steps).  The cases alternate, ``--rounds`` times, so that a
+``stats["kernel_s"]``, over N x steps; a located event redoes the pass over the whole chain, so
+the events and event sub-steps of the last run are recorded beside it).  The cases alternate, ``--rounds`` times, so that a
 change in the machine's load reaches every case alike; medians and spreads (max - min) over
 every timed frame of a case.  Load averages and the busy processes (ps) at the start are
 recorded: the 2 cores may be shared.  Writes benchmarks/results/mixed_cost.json.
@@ -58,7 +59,7 @@ for _ in range(repeats):
     next(frames)
     ns.append((b.stats["kernel_s"] - k0) / (n * steps) * 1e9)
 print(json.dumps({"ns": ns, "steps": steps, "events": b.stats["events"],
-                  "mixed": bool(b.flags.mixed)}))
+                  "substeps": b.stats["event_substeps"], "mixed": bool(b.flags.mixed)}))
 """
 
 
@@ -89,16 +90,19 @@ def main(argv=None):
               "busy_processes_before": busy(), "rows": []}
     for n in (int(float(s)) + 1 for s in args.sizes.split(",")):
         times = {case: [] for case in CASES}
+        events = {}
         for _ in range(args.rounds):
             for case in CASES:
-                times[case] += run_case(n, case, args.repeats, args.bead_steps)["ns"]
+                out = run_case(n, case, args.repeats, args.bead_steps)
+                times[case] += out["ns"]
+                events[case] = {k: out[k] for k in ("steps", "events", "substeps")}
         base = float(np.median(times["homogeneous"]))
         for case, ns in times.items():
             v = np.asarray(ns)
             row = {"n": n, "case": case, "ns_per_bead_step_median": float(np.median(v)),
                    "ns_per_bead_step_spread": float(v.max() - v.min()), "all": v.tolist(),
                    "ratio_to_homogeneous": float(np.median(v)) / base,
-                   "loadavg": os.getloadavg()}
+                   "loadavg": os.getloadavg(), **events[case]}
             result["rows"].append(row)
             print(json.dumps({k: row[k] for k in row if k != "all"}), flush=True)
     result["loadavg_after"] = os.getloadavg()

@@ -374,6 +374,16 @@ class ChainModel:
         v[bead - 1] += velocity
         return x, v, states
 
+    @staticmethod
+    def _flush_tail(x, net_force, tol):
+        """``x`` with displacements below 1e-20 of the largest set to 0, if the forces stay
+        within ``tol``.  On a substrate the equilibrium's displacement decays exponentially
+        into the bulk (over sqrt(k / k1) beads) down to subnormal numbers, whose arithmetic
+        costs x86 processors ~100x: 318 of 1e4 beads made the fast kernel 2.9x slower."""
+        flushed = np.where(np.abs(x) < 1e-20 * np.max(np.abs(x)), 0.0, x)
+        force = net_force(flushed)
+        return flushed if force is not None and np.max(np.abs(force)) <= tol else x
+
     def thermal_velocities(self) -> np.ndarray:
         """Initial random velocities [n]: ``v_i = sqrt(temperature / m_i) N_i``, ``N_i``
         standard normal from numpy's ``default_rng(seed)`` (each bead's mean kinetic energy
@@ -407,8 +417,9 @@ class ChainModel:
         for _ in range(50):
             delta = self.compressions(x)
             scale = 1.0 + float(np.max(np.abs(self.law_force(delta))))
-            if np.max(np.abs(force)) <= 4.0 * np.finfo(float).eps * scale:
-                return x
+            tol = 4.0 * np.finfo(float).eps * scale
+            if np.max(np.abs(force)) <= tol:
+                return self._flush_tail(x, net_force, tol)
             kc = self.mixture.stiffness(delta)
             k_left = kc[:-1] if self.walls else np.concatenate([[0.0], kc])
             k_right = kc[1:] if self.walls else np.concatenate([kc, [0.0]])
