@@ -114,7 +114,7 @@ def effective_damping(run, *, smoothing_time: float = SMOOTHING_TIME,
 
         cbar = effective_damping(run(load_scene("micro-star"), "reference").trajectory)
     """
-    mix = run.scene.mixture  # unlike beads: m N of Eq. 9 is the chain's mass
+    mix = getattr(run.scene, "mixture", None)  # unlike beads: m N of Eq. 9 is the chain's mass
     mass = 1.0 if mix is None else float(np.mean(mix.mass))
     c = c_eff(run.time, dissipated_energy(run), run.ledger["kinetic_energy"], run.n, mass,
               smoothing_time=smoothing_time, interpolant=interpolant)
