@@ -681,9 +681,9 @@ void FixMdgranChain::build_contacts()
     left[i] = l;
     if (l >= nlocal) cons.push_back({l, i, 0});
   }
-  // located: the owned atoms this fix moves, as runs [begin, end) of local indices (the
-  // loops over them then test nothing per atom), the others (still), and the walls among the
-  // owned and ghost atoms (u = 0, v = 0)
+  // the owned atoms this fix moves (located, or integrate yes), as runs [begin, end) of local
+  // indices (the loops over them then test nothing per atom), the others (still), and the
+  // walls among the owned and ghost atoms (u = 0, v = 0)
   runs.clear();
   still.clear();
   wall_atoms.clear();

@@ -121,7 +121,7 @@ class FixMdgranChain : public Fix {
   std::vector<int> flagged;                 // indices into cons: a possible event in the pass
   std::vector<double> roots;                // their first roots
   std::vector<int> switching;               // indices into cons: switch at the event
-  std::vector<int> runs;                    // located: owned atoms it moves, [begin, end) pairs
+  std::vector<int> runs;                    // owned atoms it moves, [begin, end) pairs
   std::vector<int> still;                   // the other owned atoms (walls, outside the group)
   std::vector<int> wall_atoms;              // walls among the owned and ghost atoms
   void build_contacts();
