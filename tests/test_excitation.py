@@ -12,7 +12,7 @@ from conftest import make_scene
 
 
 @pytest.mark.parametrize("backend", ["reference", "fast"])
-@pytest.mark.parametrize("density", [1.0, 2.5])
+@pytest.mark.parametrize("density", [0.5, 2.5])  # both mixed: one kernel variant
 def test_substrate_damping_is_a_damped_oscillator(backend, density):
     """Two beads far apart (every contact open), bead 1 struck: ``m x'' = -k1 x - c_s x'``,
     so ``x = v0 / w_d exp(-g t) sin(w_d t)`` with ``g = c_s / (2 m)``, ``w_d = sqrt(k1 / m -
