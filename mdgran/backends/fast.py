@@ -97,17 +97,17 @@ class FastBackend(Backend):
                               float(self.table.base), float(self.table._scale),
                               float(self.table.n - 1), float(self.table._h))
         singular = law.kind == "schwarz" and law.snap_off == "displacement" and law.t_min > 0.0
-        self.flags_exact = contact_eval == "exact"
+        exact = contact_eval == "exact"
         self.params = fk.Params(
             gap=float(m.gap), damping=float(m.damping), k1=float(m.k1), k3=float(m.k3),
             delta_off=float(law.delta_off), delta_max=self.table.delta_max,
             mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
             law=schwarz_constants(law), table=table,
-            mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max),
+            mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max, exact),
             sub_damping=float(m.substrate_damping))
         self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
                               k3_on=m.k3 != 0.0, locate=self.locate,
-                              exact=contact_eval == "exact", hertz=law.kind == "hertz",
+                              exact=exact, hertz=law.kind == "hertz",
                               mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0,
                               off_substrate=m.mixture is not None and m.mixture.free_beads)
         self.advance = fk.get_kernel(self.flags)
@@ -118,18 +118,19 @@ class FastBackend(Backend):
         if contact_eval == "table":
             self.stats["table"] = self.table.error()
 
-    def _mix(self, points: int, delta_max: float) -> fk.Mix:
+    def _mix(self, points: int, delta_max: float, exact: bool) -> fk.Mix:
         """The kernel's :class:`~mdgran.backends.fast_kernel.Mix` of the scene's unlike beads:
-        a force table of ``points`` nodes to ``delta_max`` (own units) per distinct law."""
+        a force table of ``points`` nodes to ``delta_max`` (own units) per distinct law (one
+        placeholder with the exact law, which needs only each law's constants)."""
         mix = self.model.mixture
         laws = mix.laws
-        if len(laws) > MAX_LAW_TABLES and not self.flags_exact:
+        if len(laws) > MAX_LAW_TABLES and not exact:
             raise SceneError("beads", f"{len(laws)} distinct pair laws (each pair's lambda "
                              "follows its size): the fast backend tabulates at most "
                              f"{MAX_LAW_TABLES}; run it with the exact law "
                              "('fast:contact_eval=exact'), or give contact.fc (one law)")
         tables = [ContactTable(law, points, delta_max)
-                  for law in (laws if not self.flags_exact else laws[:1])]
+                  for law in (laws if not exact else laws[:1])]
         length = np.ascontiguousarray(mix.length_scale, dtype=float)
         return fk.Mix(
             inv_mass=1.0 / mix.mass, on_site=np.ascontiguousarray(mix.substrate, dtype=float),
