@@ -133,6 +133,7 @@ def load(path, *, backend: str, scene_toml: str, counts) -> tuple[dict, dict, Da
             if state_digest(meta["scalars"], arrays) != meta["state_sha256"]:
                 raise CheckpointError(f"{path}: the checkpoint's state does not match its "
                                       "checksum (the file is damaged); it was kept")
+            read_structure(f)
             want = counts(meta)
             for p, k in want.items():
                 if p not in f or f[p].shape[0] < k:
@@ -151,6 +152,19 @@ def load(path, *, backend: str, scene_toml: str, counts) -> tuple[dict, dict, Da
         raise CheckpointError(f"{path}: the checkpoint cannot be read ({_first_line(exc)}); "
                               "it was kept: delete it to start afresh") from None
     return {**meta["scalars"], **arrays}, meta, digest
+
+
+def read_structure(f):
+    """Open every group and dataset of the HDF5 file ``f`` and read every attribute: a damaged
+    object header or attribute raises here (h5py checks their checksums), so that a resume
+    refuses the file before it runs, not when the writer reaches that object at the end (a
+    byte flipped in ``/parameters``' header crashed the finished run with a traceback)."""
+    def touch(obj):
+        for key in obj.attrs:
+            obj.attrs[key]
+
+    touch(f)
+    f.visititems(lambda name, obj: touch(obj))
 
 
 def _first_line(exc) -> str:

@@ -43,7 +43,7 @@ def _wait_for(path, proc, timeout=120.0, checkpoint=False):
                 with h5py.File(path, "r", locking=False) as f:
                     if "checkpoint" in f:
                         return
-            except OSError:
+            except (OSError, RuntimeError, KeyError):  # read while being written: not yet
                 pass
         time.sleep(0.05)
     proc.kill()
