@@ -34,14 +34,13 @@ contacts (units of the reference pair).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 
 from .contact import ContactLaw, fc_from_lambda
-from .contact_scalar import branch_t_ufunc, pow_ufunc
+from .contact_scalar import branch_t_ufunc, pow_ufunc, schwarz_constants
 
 
 def pair_ratios(s, k, a, walls: bool, adhesion=None):
@@ -97,7 +96,7 @@ class Mixture:
         values, index = np.unique(fc, return_inverse=True)
         return values, index.astype(np.int64)
 
-    @property
+    @cached_property
     def laws(self) -> tuple:
         """The distinct laws (one per distinct ``fc``), in own units."""
         return tuple(self.law_of_class(i) for i in range(len(self._classes[0])))
@@ -112,20 +111,12 @@ class Mixture:
             return ContactLaw("hertz", 0.0, "displacement")
         return ContactLaw("schwarz", float(self._classes[0][i]), self.law.snap_off)
 
-    def contact_law(self, k: int) -> ContactLaw:
-        """Contact ``k``'s law in its own units (scale with ``force_scale[k]``,
-        ``length_scale[k]``)."""
-        return self.law_of_class(int(self.law_index[k]))
-
     @cached_property
     def _constants(self):
-        """Per-contact ``(fc, sigma, t_min, delta_min, P(t0))`` arrays (own units), from each
-        class's :class:`ContactLaw` (so a one-class mixture has the homogeneous law's values)."""
-        cols = []
-        for law in self.laws:
-            t0 = (4.0 * law.sigma) ** (1.0 / 3.0)
-            cols.append((law.fc, law.sigma, law.t_min, law.delta_min,
-                         float(law._antiderivative(t0))) if not self.hertz else (0.0,) * 5)
+        """Per-contact ``(fc, sigma, t_min, delta_min, P(t0))`` arrays (own units): each
+        class's :func:`~mdgran.contact_scalar.schwarz_constants` (zeros for Hertz; a one-class
+        mixture has the homogeneous law's values)."""
+        cols = [tuple(schwarz_constants(law)) for law in self.laws]
         table = np.array(cols, dtype=float)[self.law_index]
         return tuple(np.ascontiguousarray(table[:, i]) for i in range(5))
 
