@@ -296,13 +296,6 @@ def contact_force(exact, hertz, d, params):
     return spline(params.table, w), True
 
 
-@njit(cache=True)
-def closed_force(exact, hertz, d, params):
-    """f(delta) of a closed contact as the loop evaluates it (table or exact)."""
-    f, ok = contact_force(exact, hertz, d, params)
-    return f
-
-
 # ---- unlike beads: each contact's own law (flags.mixed; Mix) --------------------------------
 @njit(inline="always")
 def class_law(mix, c):
