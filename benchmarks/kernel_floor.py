@@ -174,23 +174,42 @@ def c_floor(exes: dict, b, n: int, steps: int, repeats: int, tmp: Path) -> dict:
     return out
 
 
-def measure(exes: dict, sizes, repeats: int, bead_steps: float, tmp: Path) -> dict:
+def busy_processes(threshold: float = 20.0) -> list:
+    """Other processes above ``threshold`` % CPU (``ps``), as (pid, %cpu, command)."""
+    res = subprocess.run(["ps", "-eo", "pid,pcpu,comm", "--no-headers"], capture_output=True,
+                         text=True)
+    rows = [line.split(None, 2) for line in res.stdout.splitlines()]
+    return [(int(p), float(c), cmd) for p, c, cmd in rows
+            if float(c) > threshold and int(p) != os.getpid()]
+
+
+def measure(exes: dict, sizes, repeats: int, bead_steps: float, tmp: Path,
+            threads=(1,)) -> dict:
+    """Per law and N: the C builds (one thread) and the numba kernel on each thread count
+    of ``threads`` (wall time of the kernel calls; ``cpu`` is the process's, all threads)."""
     out = {}
     for law, name in LAWS.items():
         for n in sizes:
             steps = steps_for(n, bead_steps)
-            load0 = os.getloadavg()
+            load0, busy0 = os.getloadavg(), busy_processes()
             b, gen = backend(name, n, steps, repeats + 2)
             c = c_floor(exes, b, n, steps, repeats, tmp)
-            nb = time_numba(b, gen, n, steps, repeats)
+            del b, gen
+            nb = {}
+            for t in threads:
+                b, gen = backend(name, n, steps, repeats + 2, threads=t)
+                nb[str(t)] = time_numba(b, gen, n, steps, repeats)
+                nb[str(t)]["threads_used"] = b.stats.get("threads", 1)
+                del b, gen
             row = {"scene": name, "n": n, "steps_per_repeat": steps, "c": c, "numba": nb,
-                   "loads": [load0, os.getloadavg()]}
+                   "loads": [load0, os.getloadavg()], "busy_at_start": busy0}
             out[f"{law} N={n}"] = row
             print(f"{law:5s} N={n:>7d}: C " + ", ".join(
-                f"{k} {v['cpu']['min']:.2f}/{v['cpu']['median']:.2f}" for k, v in c.items())
-                + f" ns; numba {nb['cpu']['min']:.2f}/{nb['cpu']['median']:.2f} ns "
-                f"(cpu min/median), load {load0[0]:.2f}", flush=True)
-            del b, gen
+                f"{k} {v['wall']['min']:.2f}/{v['wall']['median']:.2f}" for k, v in c.items())
+                + " ns; numba " + ", ".join(
+                    f"{t} thread(s) {v['wall']['min']:.2f}/{v['wall']['median']:.2f}"
+                    for t, v in nb.items())
+                + f" ns (wall min/median), load {load0[0]:.2f}, busy {busy0}", flush=True)
     return out
 
 
@@ -214,6 +233,9 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes, 3 repeats")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--threads", type=int, nargs="+", default=[1],
+                    help="thread counts of the numba kernel (run.threads), e.g. 1 2")
+    ap.add_argument("--sizes", type=int, nargs="+", default=None)
     args = ap.parse_args(argv)
     sizes, repeats, bead_steps = ((10_000, 100_000), 3, 5e6) if args.quick else \
         (SIZES, REPEATS, BEAD_STEPS)
@@ -227,7 +249,9 @@ def main(argv=None) -> None:
                   "python": sys.version.split()[0], "mdgran": mdgran_source(),
                   "load_at_start": os.getloadavg(),
                   "check": check(exes["O2"], tmp),
-                  "ns_per_bead_step": measure(exes, sizes, repeats, bead_steps, tmp),
+                  "busy_at_start": busy_processes(),
+                  "ns_per_bead_step": measure(exes, args.sizes or sizes, repeats, bead_steps,
+                                              tmp, args.threads),
                   "load_at_end": os.getloadavg()}
     args.out.parent.mkdir(exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")

@@ -177,6 +177,9 @@ SCHEMA = {
                   "step of fixed-step backends (fast, lammps)"),
         "duration_si": Key(None, "float>0?", "a finite number > 0 in s (needs [material])", "s",
                            "run.duration in SI (needs [material])"),
+        "threads": Key(0, "int>=0", "an integer >= 0 (0: every core the process may use)", "",
+                       "threads of the fast backend's pass over a long chain (results do not "
+                       "depend on it); 0: every core the process may use"),
     },
     "output": {
         "positions": Key(True, "bool", "true or false (store H5MD position; false for long "

@@ -38,8 +38,10 @@ Example::
 from __future__ import annotations
 
 import math
+import os
 import time as _time
 
+import numba
 import numpy as np
 
 from ..contact import ContactTable
@@ -60,12 +62,24 @@ BLOCK_BEAD_STEPS = 1_000_000
 MAX_LAW_TABLES = 255
 
 
+def usable_threads(threads: int) -> int:
+    """Threads for the pass: ``threads``, or for 0 every core this process may use; at most
+    numba's pool (``NUMBA_NUM_THREADS``)."""
+    if threads < 0:
+        raise SceneError("run.threads", f"must be an integer >= 0, not {threads}")
+    if threads == 0:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else (os.cpu_count() or 1)
+    return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
 class FastBackend(Backend):
     """Fixed-step velocity Verlet with located (or step-quantized) contact events."""
 
     name = "fast"
     order = 2
-    accepted_options = ("locate_events", "contact_eval", "table_points", "delta_max", "dt")
+    accepted_options = ("locate_events", "contact_eval", "table_points", "delta_max", "dt",
+                        "threads")
     #: ledger bound ``C dt**order`` per unit of the energy scale (Backend.ledger_model):
     #: measured C (ledger error / E_s / dt**order) up to 4.3 located (the 91-case
     #: paper-robustness sweep at dt = 0.0025, largest at v0 = 64; built-in and hard scenes
@@ -86,6 +100,7 @@ class FastBackend(Backend):
         if contact_eval not in ("table", "exact"):
             raise SceneError("contact_eval", f"must be 'table' or 'exact', not {contact_eval!r}")
         self.steps_per_frame = spf
+        self.threads = usable_threads(int(options.get("threads", run.get("threads", 0))))
         self.locate = bool(locate_events)
         if not self.locate:
             self.order = 1
@@ -109,11 +124,13 @@ class FastBackend(Backend):
                               k3_on=m.k3 != 0.0, locate=self.locate,
                               exact=exact, hertz=law.kind == "hertz",
                               mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0,
-                              off_substrate=m.mixture is not None and m.mixture.free_beads)
+                              off_substrate=m.mixture is not None and m.mixture.free_beads,
+                              threaded=self.threads > 1 and m.n_contacts > fk.SEGMENT)
         self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
-                      "dt": self.dt, "steps": 0, "events": 0, "event_substeps": 0,
+                      "dt": self.dt, "threads": self.threads if self.flags.threaded else 1,
+                      "steps": 0, "events": 0, "event_substeps": 0,
                       "contact_eval": contact_eval, "wall_time_s": 0.0, "kernel_s": 0.0}
         if contact_eval == "table":
             self.stats["table"] = self.table.error()
@@ -316,6 +333,8 @@ class FastBackend(Backend):
             nframes = min(per_call, len(out_times) - i)
             block = fk.new_block(nframes, n, m)
             k0 = clock()
+            if self.flags.threaded:
+                numba.set_num_threads(self.threads)
             done = self.advance(*kernel_args, fk.plain(block), i, nframes, spf, self.dt)
             stats["kernel_s"] += clock() - k0
             times = out_times[i:i + done].tolist()

@@ -49,6 +49,18 @@ Terms switched off (walls, damping, k1, k3, event location, exact law) are compi
 constants of :func:`get_kernel` (:class:`Flags`): each combination is a separately compiled
 variant (cached on disk by numba), so an absent term costs nothing in the loop.
 
+**Segments and threads.**  The pass is cut into segments of :data:`SEGMENT` contacts
+(:class:`Segments`, :func:`segment_pass`).  Each segment finishes the beads inside it and
+hands back its damping power, the forces of its first and last contacts, the contacts it
+flagged and its step-quantized switches; :func:`merge_segments` then finishes the bead at
+each edge from those two forces (the same operations) and joins the rest in segment order.
+A threaded variant (``Flags.threaded``) runs the segments on numba's threads
+(``prange``); since the cut depends on the chain alone, the result does not depend on the
+thread count, bitwise.  Against one segment (a chain of at most SEGMENT contacts is one),
+only the damping power is summed in another order: positions, velocities, states and events
+are bitwise the same, ``D_viscous`` agrees to round-off.  Event location, switching and
+settling stay serial (rare).
+
 **Records** (numba named tuples and one structured record, so that each function takes a
 few arguments that say what they are): :class:`Flags` (the variant), :class:`Params` (the
 run's constants, with the law's :class:`~mdgran.contact_scalar.SchwarzConstants` and the
@@ -63,11 +75,12 @@ operations as written.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..contact_scalar import SchwarzConstants, law_energy, law_force, schwarz_mean_force
 
@@ -85,6 +98,10 @@ CHAT_CAP = 64
 #: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
 #: displacement rule); see `verlet_pass`.
 SING_BAND = 0.1
+#: Contacts per segment of a pass (:class:`Segments`): the unit the threads share.  It depends
+#: on nothing but this constant, so a run's result does not depend on the thread count; a
+#: chain of at most SEGMENT contacts is one segment, and its pass is the serial one.
+SEGMENT = 2048
 
 
 # ---- the kernel's records -----------------------------------------------------------------
@@ -101,6 +118,7 @@ class Flags(NamedTuple):
     mixed: bool = False  # unlike beads: per-bead masses, per-contact laws (:class:`Mix`)
     sub_damped: bool = False  # substrate damping force -c_s v on the beads
     off_substrate: bool = False  # (mixed) some bead is off the substrate: Mix.on_site is read
+    threaded: bool = False  # the segments of a pass run on several threads (same results)
 
 
 class ForceTable(NamedTuple):
@@ -180,6 +198,29 @@ class EventLog(NamedTuple):
     kind: np.ndarray
 
 
+# columns of Segments.real and Segments.ints
+R_POWER, R_FIRST, R_FIRST_KICK, R_LAST, R_LAST_KICK = 0, 1, 2, 3, 4
+I_FLAGGED, I_SWITCHES, I_STATUS, I_BAD = 0, 1, 2, 3
+
+
+class Segments(NamedTuple):
+    """The pass's parallel unit: contacts ``s * size .. min((s + 1) * size, m) - 1`` form
+    segment ``s`` (:func:`segment_pass`), which writes what it found into row ``s`` of these
+    arrays; :func:`merge_segments` then combines them in segment order.  ``size`` depends on
+    the chain alone (:data:`SEGMENT`), never on the thread count.  Few arrays, because each
+    one a pass touches costs numba's reference counting once per pass."""
+
+    size: int  # contacts per segment
+    count: int  # segments
+    real: np.ndarray  # [count, 5] damping power; (F, Fv) of the first and of the last contact
+    ints: np.ndarray  # [count, 4] int64 flagged contacts, step-quantized switches, status
+    #                   (OK or OUT_OF_TABLE: the segment's last failure), its contact
+    flag: np.ndarray  # [count, FLAG_CAP] int64 the first flagged contacts (row 0 is
+    #                   KernelState.flagged: merge_segments appends the other rows' to it)
+    ev_real: np.ndarray  # [m, 2] switch k of segment s at row s * size + k: time, loss
+    ev_contact: np.ndarray  # [m] int64 its contact
+
+
 class KernelState(NamedTuple):
     """Everything the kernel updates in place besides the beads."""
 
@@ -189,6 +230,7 @@ class KernelState(NamedTuple):
     flagged: np.ndarray  # [FLAG_CAP] contacts a pass flagged as possibly switching
     switching: np.ndarray  # [FLAG_CAP] contacts switching at the located event time
     chatter: np.ndarray  # [CHAT_CAP, 2] (contact, switches) at the current instant
+    seg: Segments  # the pass's segments
 
 
 class FrameBlock(NamedTuple):
@@ -229,15 +271,27 @@ COUNTERS = np.dtype([
 ])
 
 
-def new_state(n_contacts: int, event_capacity: int) -> KernelState:
-    """A zeroed :class:`KernelState` (no chatter instant yet)."""
+def new_segments(n_contacts: int, size: int | None = None) -> Segments:
+    """The :class:`Segments` of a chain of ``n_contacts`` contacts, ``size`` (default
+    :data:`SEGMENT`) contacts each (at least one segment)."""
+    size = int(size or SEGMENT)
+    count = max(1, -(-n_contacts // size))
+    return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
+                    np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
+                    np.zeros(n_contacts, dtype=np.int64))
+
+
+def new_state(n_contacts: int, event_capacity: int, segment: int | None = None) -> KernelState:
+    """A zeroed :class:`KernelState` (no chatter instant yet), its pass cut into segments of
+    ``segment`` contacts (default :data:`SEGMENT`)."""
     counters = np.zeros(1, dtype=COUNTERS)
     counters["chatter_time"] = -1.0
     log = EventLog(np.zeros(event_capacity), np.zeros(event_capacity, dtype=np.int64),
                    np.zeros(event_capacity, dtype=np.int8))
-    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log,
-                       np.zeros(FLAG_CAP, dtype=np.int64), np.zeros(FLAG_CAP, dtype=np.int64),
-                       np.zeros((CHAT_CAP, 2), dtype=np.int64))
+    seg = new_segments(n_contacts, segment)
+    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log, seg.flag[0],
+                       np.zeros(FLAG_CAP, dtype=np.int64), np.zeros((CHAT_CAP, 2), dtype=np.int64),
+                       seg)
 
 
 # ---- geometry and the force of a closed contact -------------------------------------------
@@ -389,22 +443,21 @@ def record_event(ks, j, t, kind):
 
 
 # ---- one Verlet pass ------------------------------------------------------------------------
-@njit(cache=True)
-def quantized_switch(flags, params, j, d, x_old, h, t0, ks):
+@njit(inline="always")
+def quantized_switch(flags, params, j, d, doff, x_old, h, t0, closed):
     """locate = False: switch contact j, whose end-of-step compression d is past its
-    switching point; the event time is interpolated linearly between the step's ends."""
-    closed = ks.closed
-    thr = delta_off_at(params, j) if closed[j] else 0.0
-    d0 = across(flags.walls, x_old, j) - params.gap
+    switching point ``doff`` (closed) or 0 (open); returns ``(j, time, loss)``: the event
+    time interpolated linearly between the step's ends, and the hysteresis loss ``V(d)`` on
+    opening (0 on closing)."""
+    thr = doff if closed[j] else 0.0
+    d0 = across(flags.walls, x_old, np.int64(j)) - params.gap
     span = d0 - d
     frac = min(max((d0 - thr) / span if span != 0.0 else 1.0, 0.0), 1.0)
+    loss = 0.0
     if closed[j]:
-        ks.counters[0].d_hysteresis += energy_at(flags, params, j, d)
-        closed[j] = False
-        record_event(ks, j, t0 + frac * h, 0)
-    else:
-        closed[j] = True
-        record_event(ks, j, t0 + frac * h, 1)
+        loss = energy_at(flags, params, j, d)
+    closed[j] = not closed[j]
+    return np.int64(j), t0 + frac * h, loss
 
 
 @njit(cache=True, inline="always")
@@ -456,9 +509,16 @@ def quantized_due(closed, d, delta_off):
 
 
 @njit(inline="always")
-def verlet_pass(flags, params, old, new, h, t0, ks):
-    """One Verlet step of length h from the beads ``old`` into ``new``; returns the damping
-    power at the end (rates from v_est).
+def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
+    """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact)``): returns
+    its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
+    first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
+    switches, status, its contact); the first flagged contacts go into row ``s`` of ``flag``,
+    the switches into ``ev_*``.  The bead left of its first contact is left to
+    :func:`merge_segments` (both its contact forces are needed).  The arrays it writes are
+    arguments, not fields of a record: numba's parallel loop drops writes made through a
+    record built inside it (:func:`run_segments`).
 
     One pass over the contacts from left to right: predict the right bead of the contact,
     compute the contact force, finish the left bead (its acceleration and end velocity).
@@ -470,26 +530,33 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    walls, hertz, exact = flags.walls, flags.hertz, flags.exact
-    counters = ks.counters[0]
-    closed, flagged = ks.closed, ks.flagged
+    h, t0, size, flag, ev_real, ev_contact = seg
+    walls, hertz = flags.walls, flags.hertz
     xo, vo, ao = old.x, old.v, old.a
     # unsigned indices: numba emits no negative-index wraparound code for them
     n = np.uint64(xo.shape[0])
     one = np.uint64(1)
+    j0 = np.uint64(s * size)
+    j1 = min(j0 + np.uint64(size), np.uint64(closed.shape[0]))
     hh = 0.5 * h
     gap, c, doff = params.gap, params.damping, params.delta_off
     nflag = 0
+    nev = 0
+    status = OK
+    bad = 0
     power = 0.0
+    rshift = np.uint64(0) if walls else one  # right bead of contact j: j + rshift
     # left bead of the current contact: (x, v_half, v_est); the wall for walls
     x_c, vh_c, ve_c = 0.0, 0.0, 0.0
-    if not walls:
-        vh_c = vo[0] + hh * ao[0]
-        x_c = xo[0] + h * vh_c
-        ve_c = vh_c + hh * ao[0]
+    if j0 + rshift >= one:
+        lb = j0 + rshift - one
+        vh_c = vo[lb] + hh * ao[lb]
+        x_c = xo[lb] + h * vh_c
+        ve_c = vh_c + hh * ao[lb]
     f_l, fv_l = 0.0, 0.0  # force of the contact left of that bead (Fv: for the kick)
-    rshift = np.uint64(0) if walls else one  # right bead of contact j
-    for j in range(np.uint64(closed.shape[0])):
+    f_first, fv_first = 0.0, 0.0
+    for i in range(j1 - j0):
+        j = j0 + i
         rb = j + rshift
         x_r, vh_r, ve_r = 0.0, 0.0, 0.0
         if rb < n:
@@ -502,12 +569,15 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
         if flags.mixed:
             doff = params.mix.delta_off[j]
         if not flags.locate and quantized_due(closed[j], d, doff):
-            quantized_switch(flags, params, np.int64(j), d, xo, h, t0, ks)
+            k = j0 + np.uint64(nev)
+            ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
+                flags, params, j, d, doff, xo, h, t0, closed)
+            nev += 1
         f_r, fv_r = 0.0, 0.0
         if closed[j]:
             f_r, ok = force_at(flags, params, j, d)
             if not ok:
-                fail(counters, OUT_OF_TABLE, np.int64(j))
+                status, bad = OUT_OF_TABLE, np.int64(j)
             fv_r = f_r
             # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
             if flags.mixed:  # the class's band, in the contact's own units
@@ -530,28 +600,118 @@ def verlet_pass(flags, params, old, new, h, t0, ks):
         if flags.locate:
             # a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
             if g < 0.0 or g < 0.5 * h * gd:
-                if nflag < flagged.shape[0]:
-                    flagged[nflag] = np.int64(j)
+                if nflag < flag.shape[1]:
+                    flag[s, nflag] = np.int64(j)
                 nflag += 1
-        if rb >= one:  # finish the left bead
+        if j == j0:  # the segment's edge: its first contact's force, for merge_segments
+            f_first, fv_first = f_r, fv_r
+        if rb >= one and (j > j0 or s == 0):  # finish the left bead
             a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, rb - one, flags,
                                        params)
             if flags.sub_damped:
                 power += substrate_power(ve_c, rb - one, flags, params)
-            new.x[rb - one] = x_c
-            new.a[rb - one] = a
-            new.v[rb - one] = vh_c + hh * av
+            xn[rb - one] = x_c
+            an[rb - one] = a
+            vn[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
-    if not walls:  # the last bead has no contact on its right
+    if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params)
         if flags.sub_damped:
             power += substrate_power(ve_c, n - one, flags, params)
-        new.x[n - one] = x_c
-        new.a[n - one] = a
-        new.v[n - one] = vh_c + hh * av
-    counters.flagged = nflag
+        xn[n - one] = x_c
+        an[n - one] = a
+        vn[n - one] = vh_c + hh * av
+    return (power, f_first, fv_first, f_l, fv_l), (nflag, nev, status, bad)
+
+
+@njit(cache=True)
+def finish_edge(flags, params, old, new, h, seg, s):
+    """Finish the bead left of segment s's first contact (s >= 1), between the last contact
+    of segment s - 1 and the first of s, as :func:`segment_pass` finishes every other bead
+    (the same operations); returns its substrate damping power."""
+    b = s * seg.size - (1 if flags.walls else 0)
+    hh = 0.5 * h
+    a_b = old.a[b]
+    vh = old.v[b] + hh * a_b
+    x = old.x[b] + h * vh
+    ve = vh + hh * a_b
+    real = seg.real
+    a, av = bead_accelerations(real[s - 1, R_LAST] - real[s, R_FIRST],
+                               real[s - 1, R_LAST_KICK] - real[s, R_FIRST_KICK], x, ve, b,
+                               flags, params)
+    new.x[b] = x
+    new.a[b] = a
+    new.v[b] = vh + hh * av
+    return substrate_power(ve, b, flags, params) if flags.sub_damped else 0.0
+
+
+@njit(cache=True)
+def log_switches(ks, s):
+    """Log segment s's step-quantized switches in order (hysteresis loss on opening)."""
+    seg = ks.seg
+    counters = ks.counters[0]
+    first = s * seg.size
+    for k in range(first, first + seg.ints[s, I_SWITCHES]):
+        j = seg.ev_contact[k]
+        if not ks.closed[j]:
+            counters.d_hysteresis += seg.ev_real[k, 1]
+        record_event(ks, j, seg.ev_real[k, 0], 1 if ks.closed[j] else 0)
+
+
+@njit(cache=True)
+def gather_flags(seg, s, total):
+    """Append segment s's flagged contacts to row 0 (KernelState.flagged), which holds
+    ``total`` of them."""
+    cap = seg.flag.shape[1]
+    for k in range(min(seg.ints[s, I_FLAGGED], cap - total)):
+        seg.flag[0, total + k] = seg.flag[s, k]
+
+
+@njit(inline="always")
+def merge_segments(flags, params, old, new, h, ks):
+    """After every segment of a pass (:func:`segment_pass`): finish the beads at their
+    edges, then in segment order add up the damping power, log the step-quantized switches
+    (and their hysteresis losses), gather the flagged contacts into ``ks.flagged`` and
+    record failures, so that all of it is as one pass from left to right would have it
+    whatever thread ran which segment.  Returns the damping power at the step's end."""
+    seg = ks.seg
+    ints, real = seg.ints, seg.real
+    power = 0.0
+    total = 0
+    for s in range(seg.count):
+        if s > 0:
+            power += finish_edge(flags, params, old, new, h, seg, s)
+            if total < FLAG_CAP:
+                gather_flags(seg, s, total)
+        power += real[s, R_POWER]
+        if ints[s, I_SWITCHES] > 0:
+            log_switches(ks, s)
+        total += ints[s, I_FLAGGED]
+        if ints[s, I_STATUS] != OK:
+            fail(ks.counters[0], ints[s, I_STATUS], ints[s, I_BAD])
+    ks.counters[0].flagged = total
     return power
+
+
+@njit(inline="always")
+def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
+    """One Verlet step of length h from the beads ``old`` into ``new``; returns the damping
+    power at the end (rates from v_est).  The pass is cut into segments
+    (:class:`Segments`): one is run here, several by ``run_segments`` (a loop over them, on
+    several threads in a threaded variant), and :func:`merge_segments` joins them."""
+    seg = ks.seg
+    if seg.count > 1:
+        return run_segments(params, old, new, h, t0, ks)
+    real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
+                              (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact), 0)
+    if ints[I_SWITCHES] > 0:
+        seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
+        log_switches(ks, 0)
+    if ints[I_STATUS] != OK:
+        fail(ks.counters[0], ints[I_STATUS], ints[I_BAD])
+    ks.counters[0].flagged = ints[I_FLAGGED]
+    return real[R_POWER]
 
 
 # ---- event location and switching (rare path; flags at run time) --------------------------
@@ -768,7 +928,7 @@ def switch_all(flags, params, count, t, beads, ks):
 
 
 @njit(inline="always")
-def advance_steps(flags, params, buffers, ks, nsteps, dt):
+def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
     """Up to nsteps steps of dt from buffers[counters.current]; each step is split at the
     events located inside it (the pass is redone to the earliest event time te, the
     contacts switch, the rest of the step follows in the new state).  Stops early on an
@@ -793,7 +953,7 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt):
             w = 1 - o
             old, new = copies[o], copies[w]
             counters.flagged = 0
-            p1 = verlet_pass(flags, params, old, new, h, t0 + done, ks)
+            p1 = verlet_pass(flags, params, old, new, h, t0 + done, ks, run_segments)
             if counters.status != OK:
                 counters.bad_time = t0 + done + h
                 return
@@ -836,14 +996,16 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt):
 
 
 @njit(inline="always")
-def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt):
+def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
+                   run_segments):
     """Frames ``first .. first + nframes - 1`` (frame ``i`` ends at step ``i * spf``), each
     state at a frame's end copied into ``block`` row ``i - first``; returns the frames done
     (fewer on an error or a half-full event log: ``counters.status``; the steps of the
     unfinished frame done so far are kept, and a next call continues them)."""
     counters = ks.counters[0]
     for k in range(nframes):
-        advance_steps(flags, params, buffers, ks, (first + k) * spf - counters.step, dt)
+        advance_steps(flags, params, buffers, ks, (first + k) * spf - counters.step, dt,
+                      run_segments)
         if counters.status != OK:
             return k
         c = counters.current
@@ -881,7 +1043,7 @@ def named_params(p):
 @njit(inline="always")
 def named_state(k):
     """:class:`KernelState` from ``plain(ks)``."""
-    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], k[5])
+    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], k[5], Segments(*k[6]))
 
 
 _KERNELS: dict = {}
@@ -903,8 +1065,68 @@ def get_kernel(flags: Flags):
 
 def _make_advance(flags):
     @njit(cache=True)
+    def one_segment(params, old, xn, vn, an, closed, seg, s):
+        """Segment s of a pass (:func:`segment_pass`), its results into row s of
+        ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
+        parallel loop: inlined there, numba's array analysis of the loop fails on it."""
+        h, t0, size, real, ints, flag, ev_real, ev_contact = seg
+        r, i = segment_pass(flags, params, old, xn, vn, an, closed,
+                            (h, t0, size, flag, ev_real, ev_contact), s)
+        for k in range(5):
+            real[s, k] = r[k]
+        for k in range(4):
+            ints[s, k] = i[k]
+
+    @njit(cache=True, parallel=flags.threaded)
+    def run_segments(params, old, new, h, t0, ks):
+        """Every segment of a pass (:func:`segment_pass`), on the threads numba has
+        (``numba.set_num_threads``) in a threaded variant, in order otherwise, joined by
+        :func:`merge_segments`; returns the damping power at the step's end.  numba's
+        parallel loop takes arrays and numbers from outside, not records: they are taken
+        apart before it and put together again in it."""
+        gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s = params
+        l0, l1, l2, l3, l4 = law
+        t_coef, t_base, t_scale, t_last, t_step = table
+        m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12 = mix
+        xo, vo, ao = old
+        xn, vn, an = new
+        closed = ks.closed
+        size, count, real, ints, flag, ev_real, ev_contact = ks.seg
+        for s in prange(count):
+            p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
+                       SchwarzConstants(l0, l1, l2, l3, l4),
+                       ForceTable(t_coef, t_base, t_scale, t_last, t_step),
+                       Mix(m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12), c_s)
+            one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
+        return merge_segments(flags, params, old, new, h, ks)
+
+    @njit(cache=True)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
         return advance_frames(flags, named_params(params), Beads(*buffers), named_state(ks),
-                              FrameBlock(*block), first, nframes, spf, dt)
+                              FrameBlock(*block), first, nframes, spf, dt, run_segments)
 
+    variant_cache(run_segments, flags)
+    variant_cache(advance, flags)
     return advance
+
+
+def variant_cache(dispatcher, flags):
+    """Let numba's disk cache find a variant's compiled ``advance`` and ``run_segments`` in
+    the next process.
+
+    numba keys a cached closure by its cell contents, pickled, and a compiled function in a
+    cell (``one_segment``, ``run_segments``) pickles with UUIDs drawn at random in each
+    process: the variant would be compiled anew in every process.  Its key here is the
+    function's code and the variant's flags instead (the cache still checks this file's
+    time stamp, so an edit of the kernel invalidates it).  Uses numba's
+    ``Dispatcher._cache``; without it a variant is only compiled more often."""
+    from numba.core.caching import FunctionCache
+
+    class VariantCache(FunctionCache):
+        def _index_key(self, sig, codegen):
+            code = hashlib.sha256(self._py_func.__code__.co_code).hexdigest()
+            return sig, codegen.magic_tuple(), (code, repr(tuple(flags)))
+
+    if hasattr(dispatcher, "_cache"):
+        dispatcher._cache = VariantCache(dispatcher.py_func)

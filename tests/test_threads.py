@@ -1,0 +1,103 @@
+"""The fast backend's pass cut into segments and run on several threads (issue 18).
+
+A pass over the chain is cut into segments of ``fast_kernel.SEGMENT`` contacts; the segments
+may run on any thread, and their results are joined in segment order.  What must hold:
+
+* the thread count changes nothing: 1 and 2 threads give bitwise the same file contents
+  (positions, velocities, contact states, events, every ledger term), located and
+  step-quantized events alike, with events in several segments;
+* the segment size changes nothing but the order in which the damping power is summed:
+  positions, velocities, states and events are bitwise those of the one-segment (serial)
+  pass, and ``D_viscous`` agrees to round-off.
+"""
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from mdgran.backends import fast_kernel as fk
+from mdgran.scene import load_scene
+from mdgran.simulation import run
+
+from conftest import make_scene
+
+
+def fast_run(scene, segment, threads, monkeypatch, **options):
+    """The in-memory record of ``scene`` on the fast backend, its pass cut into segments of
+    ``segment`` contacts, on ``threads`` threads."""
+    monkeypatch.setattr(fk, "SEGMENT", segment)
+    res = run(scene, "fast", threads=threads, **options)
+    assert res.status == "complete", res.status
+    return res
+
+
+def assert_same_trajectory(a, b):
+    """Positions, velocities, contact states and events bitwise equal."""
+    ta, tb = a.trajectory, b.trajectory
+    for name in ("x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
+        assert np.array_equal(getattr(ta, name), getattr(tb, name)), name
+
+
+def assert_bitwise(a, b):
+    """Everything the record holds bitwise equal, every ledger term included."""
+    assert_same_trajectory(a, b)
+    for term, values in a.trajectory.ledger.items():
+        assert np.array_equal(values, b.trajectory.ledger[term]), term
+
+
+@pytest.mark.parametrize("name, options", [("micro-star", {}),
+                                           ("macro-hertz", {"locate_events": False})])
+def test_two_threads_give_the_one_thread_result_bitwise(name, options, monkeypatch):
+    """micro-star (located events) and macro-hertz (step-quantized), 20 beads cut into
+    segments of 6 contacts: 1 and 2 threads bitwise equal; and, against the uncut pass, the
+    same trajectory with D_viscous to round-off."""
+    scene = load_scene(name, [("run.duration", 60.0)])
+    one = fast_run(scene, 6, 1, monkeypatch, **options)
+    two = fast_run(scene, 6, 2, monkeypatch, **options)
+    assert two.stats["threads"] == 2 and one.stats["threads"] == 1
+    assert one.stats["events"] > 0
+    assert_bitwise(one, two)
+    serial = fast_run(scene, 1 << 30, 1, monkeypatch, **options)
+    assert_same_trajectory(serial, one)
+    d0 = np.asarray(serial.trajectory.ledger["dissipated_viscous"])
+    d1 = np.asarray(one.trajectory.ledger["dissipated_viscous"])
+    assert np.max(np.abs(d1 - d0)) <= 64 * np.finfo(float).eps * max(d0.max(), 1e-300)
+
+
+@pytest.mark.parametrize("n, segment, locate", [(100_000, None, False), (3000, 64, True)])
+def test_long_chain_with_events_in_many_segments(n, segment, locate, monkeypatch):
+    """Chains whose contacts start open and whose beads get thermal velocities, so that
+    contacts close all along them: 10^5 beads in 49 segments of the default size with
+    step-quantized events, and 3000 beads in 47 segments of 64 with located events (each
+    located event redoes the pass over the whole chain, so a long chain with events
+    everywhere is slow there).  2 threads give the 1-thread result bitwise."""
+    segment = segment or fk.SEGMENT
+    scene = load_scene("micro-star", [("chain.n", n), ("chain.initial_gap", 0.002),
+                                      ("thermal.temperature", 1e-3), ("run.duration", 1.0),
+                                      ("run.output_interval", 0.25)])
+    one = fast_run(scene, segment, 1, monkeypatch, locate_events=locate)
+    two = fast_run(scene, segment, 2, monkeypatch, locate_events=locate)
+    assert two.stats["threads"] == 2
+    assert_bitwise(one, two)
+    segments = np.unique((one.trajectory.ev_contact - 1) // segment)
+    assert len(segments) >= 40, segments
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(2, 40), segment=st.integers(1, 45), free=st.booleans(),
+       locate=st.booleans(), gap=st.sampled_from([0.0, 0.3]))
+def test_any_segment_size_keeps_the_trajectory(n, segment, free, locate, gap):
+    """Chains of 2-40 beads, fixed or free, gap or none, located or quantized events, any
+    segment size: the trajectory is bitwise that of the uncut pass, D_viscous agrees to
+    round-off, and the ledger closes as well."""
+    scene = make_scene(chain={"n": n, "boundary": "free" if free else "fixed",
+                              "initial_gap": gap},
+                       impulse={"bead": 1, "velocity": 2.0},
+                       run={"duration": 20.0, "output_interval": 0.5, "dt": 0.005})
+    with pytest.MonkeyPatch.context() as mp:
+        cut = fast_run(scene, segment, 1, mp, locate_events=locate)
+        whole = fast_run(scene, 1 << 30, 1, mp, locate_events=locate)
+    assert_same_trajectory(whole, cut)
+    d0 = np.asarray(whole.trajectory.ledger["dissipated_viscous"])
+    d1 = np.asarray(cut.trajectory.ledger["dissipated_viscous"])
+    assert np.max(np.abs(d1 - d0)) <= 64 * np.finfo(float).eps * max(d0.max(), 1e-300)
+    assert abs(cut.max_ledger_error - whole.max_ledger_error) <= 1e-12
