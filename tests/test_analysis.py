@@ -72,6 +72,22 @@ def test_smoothing_spline_bitwise_scipys(n, lam):
         make_smoothing_spline(y[::-1] * 0.0, y, lam)
 
 
+def test_interior_extrema_as_scipys_argrelextrema():
+    """The envelopes' extrema are scipy.signal.argrelextrema's (order 1), ties, plateaus, NaNs,
+    short series and ends included."""
+    from scipy.signal import argrelextrema
+
+    from mdgran.analysis.effective_damping import interior_extrema
+
+    rng = np.random.default_rng(3)
+    series = [rng.integers(0, 4, 60).astype(float), rng.standard_normal(200),
+              np.array([1.0, 2.0, 2.0, 1.0, 3.0, np.nan, 0.0, 5.0, 1.0]), np.array([2.0, 1.0]),
+              np.array([1.0]), np.array([0.0, 1.0, 0.0])]
+    for y in series:
+        for comparator in (np.greater, np.less):
+            assert np.array_equal(interior_extrema(y, comparator), argrelextrema(y, comparator)[0])
+
+
 # ---- clusters ----------------------------------------------------------------------------------
 # n = 4 beads, fixed walls, contacts 1..5 (contact k joins bead k-1 and bead k), all closed at 0.
 EV_TIME = np.array([1.0, 2.0, 3.0, 5.0, 5.0])

@@ -27,7 +27,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BSpline, CubicSpline, PchipInterpolator
 from scipy.linalg import solve_banded
-from scipy.signal import argrelextrema
 
 #: Default smoothing time (time units 1/q).  The fast intra-cluster period is about 2.3 and the
 #: substrate period 2 pi / sqrt(k1) about 57 for the paper's chains: tau = 10 removes the former
@@ -114,6 +113,17 @@ def make_smoothing_spline(x, y, lam: float):
     return BSpline.construct_fast(t, c_, 3)
 
 
+def interior_extrema(y, comparator) -> np.ndarray:
+    """Indices ``i`` (``0 < i < len(y) - 1``) where ``comparator(y[i], y[i - 1])`` and
+    ``comparator(y[i], y[i + 1])`` (``np.greater``: the strict local maxima): scipy's
+    ``argrelextrema(y, comparator)[0]`` (order 1; its clipped ends compare a sample with
+    itself, never an extremum for a strict comparator), without importing scipy.signal (0.6 s
+    of a process's start)."""
+    y = np.asarray(y)
+    inner = comparator(y[1:-1], y[:-2]) & comparator(y[1:-1], y[2:])
+    return np.flatnonzero(inner) + 1
+
+
 def envelope_mean(t, y, interpolant: str = "cubic"):
     """``<<y>>``: mean of the interpolants through the local maxima and the local minima of ``y``.
 
@@ -130,7 +140,7 @@ def envelope_mean(t, y, interpolant: str = "cubic"):
     make = CubicSpline if interpolant == "cubic" else PchipInterpolator
     out = np.zeros_like(y)
     for sign, comparator in ((1.0, np.greater), (-1.0, np.less)):
-        idx = list(argrelextrema(y, comparator)[0])
+        idx = list(interior_extrema(y, comparator))
         if sign * (y[0] - y[1]) >= 0:
             idx.insert(0, 0)
         if sign * (y[-1] - y[-2]) >= 0:
