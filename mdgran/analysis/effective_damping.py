@@ -213,13 +213,14 @@ def smoothed_kinetic(traj, interpolant: str = "cubic") -> np.ndarray:
 
 
 def decay_time(t, kinetic, fraction: float = float(np.exp(-1.0)),
-               interpolant: str = "cubic") -> float:
+               interpolant: str = "cubic", envelope=None) -> float:
     """First time at which ``<<T>>`` falls below ``fraction * T(0)`` (NaN if it never does).
 
     Uses the envelope mean so that the fast exchange between kinetic and potential energy does
-    not trigger it early.
+    not trigger it early.  ``envelope``: ``envelope_mean(t, kinetic, interpolant)`` if the
+    caller has it already.
     """
-    tt = envelope_mean(t, kinetic, interpolant)
+    tt = envelope_mean(t, kinetic, interpolant) if envelope is None else envelope
     below = np.nonzero(tt < fraction * kinetic[0])[0]
     return float(t[below[0]]) if len(below) else float("nan")
 
