@@ -62,8 +62,11 @@ def where_it_ran(scene_spec, backend, case, out_dir, *rest):
     """A sweep case (run_case's arguments) that records the process and cores it ran on."""
     from pathlib import Path
 
+    import gc
+
     summary = {"index": case["index"], "params": case["params"], "status": "complete",
-               "pid": os.getpid(), "cores": sorted(os.sched_getaffinity(0))}
+               "pid": os.getpid(), "cores": sorted(os.sched_getaffinity(0)),
+               "frozen": gc.get_freeze_count()}
     (Path(out_dir) / "cases" / f"{case['index']:04d}.json").write_text(json.dumps(summary))
     return summary
 
@@ -87,4 +90,6 @@ def test_two_workers_run_on_disjoint_shares_of_the_cores(tmp_path):
                     case_fn=where_it_ran)
     assert len({r["pid"] for r in one}) == 1  # one persistent worker ran every case
     assert all(r["cores"] == cores for r in one)  # ... on every core
+    # ... and after its first case, what it holds is out of the collector's full passes
+    assert one[0]["frozen"] == 0 and all(r["frozen"] > 1000 for r in one[1:])
     assert np.all([r["status"] == "complete" for r in res + one])
