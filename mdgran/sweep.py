@@ -68,7 +68,7 @@ mdgran, loads the compiled kernels and builds what a case shares with the next (
 backend's contact table) once, and every case is still a run of its own (its file and summary
 are those of the case run alone).  With several workers each runs on a share of the cores the
 sweep may use (:func:`worker_cores`: with ``--workers 2`` on two cores, one core each), so a
-backend that takes the cores a process may use as its thread count does not run two threads
+backend whose thread count defaults to the cores a process may use does not run two threads
 per core.
 
 **MPI.**  The same spec runs on MPI ranks through mpi4py's ``MPIPoolExecutor``
@@ -358,9 +358,9 @@ def worker_cores(slot: int, workers: int, cores: list) -> list:
     """The cores worker ``slot`` (0-based) of ``workers`` runs on, of the sweep's ``cores``:
     all of them for one worker; else a share of its own, ``len(cores) // workers`` or one
     more (contiguous), or, with more workers than cores, core ``slot mod len(cores)``.  A
-    backend whose default thread count is the cores a process may use (the fast backend's
-    ``run.threads = 0``) then runs each case on its worker's share, instead of every worker
-    taking every core."""
+    backend whose thread count defaults to the cores a process may use
+    (``os.sched_getaffinity``) then runs each case on its worker's share, instead of every
+    worker taking every core."""
     cores = sorted(cores)
     if workers <= 1 or len(cores) <= 1:
         return cores
