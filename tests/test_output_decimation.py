@@ -157,7 +157,7 @@ def test_chunks_and_buffer_by_bytes():
     assert chunk_shape((1000,), 8) == (262, 1000)
     # a 1e6-bead frame (x, v and 1 byte per contact = 17 MB): 3 frames in 64 MiB
     assert buffer_frames(16e6 + 1e6 + 1) == 3
-    assert buffer_frames(200.0) == H5MD_BLOCK and buffer_frames(1e12) == 1
+    assert buffer_frames(200.0) == H5MD_BLOCK == 8192 and buffer_frames(1e12) == 1
 
 
 @pytest.mark.parametrize("key,value", [("output.bead_stride", "-1"),
