@@ -24,6 +24,11 @@ repeat (a change of machine load hits both alike).  Per tree and repeat the JSON
 ``--quick``: the sweep's small grid (v0 = 2, 16; K1 = 4.6, 21.5: 4 cases) at the full length
 t = 400, one repeat.
 
+``--workers 1 2`` runs each repeat with one worker and with two (each tree, alternating).  With
+two trees, the two folders of each (repeat, workers) are compared case by case before they are
+removed (``reference/compare_sweeps.py``: every dataset bitwise, every attribute, every summary
+but the timings): ``identity`` in the JSON counts the identical and the differing cases.
+
 Usage::
 
     git -C /work/main worktree add /work/wt-before HEAD
@@ -54,10 +59,11 @@ BUSY_CPU_PERCENT = 10.0
 
 
 def busy_processes() -> list:
-    """``[pid, %cpu, command]`` of the processes using more than BUSY_CPU_PERCENT of a core
-    (``ps``: averaged over each one's life), other than this one; [] where ps is missing."""
+    """``[pid, %cpu, command line]`` of the processes using more than BUSY_CPU_PERCENT of a
+    core (``ps``: averaged over each one's life), other than this one; [] where ps is
+    missing."""
     try:
-        out = subprocess.run(["ps", "-eo", "pid=,pcpu=,comm="], capture_output=True,
+        out = subprocess.run(["ps", "-eo", "pid=,pcpu=,args="], capture_output=True,
                              text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError):
         return []
@@ -66,7 +72,7 @@ def busy_processes() -> list:
         parts = line.split(None, 2)
         if len(parts) == 3 and int(parts[0]) != os.getpid() and float(parts[1]) > \
                 BUSY_CPU_PERCENT:
-            busy.append([int(parts[0]), float(parts[1]), parts[2]])
+            busy.append([int(parts[0]), float(parts[1]), parts[2][:120]])
     return busy
 
 
@@ -99,27 +105,38 @@ def case_stats(out: Path) -> dict:
             "kernel_sum_s": kernel, "backend_sum_s": backend}
 
 
-def one_sweep(tree: Path, workers: int, quick: bool) -> dict:
-    """Run the sweep once with ``tree`` first on the path, in a fresh folder; its timings."""
+def one_sweep(tree: Path, workers: int, quick: bool, out: Path) -> dict:
+    """Run the sweep once with ``tree`` first on the path, into the fresh folder ``out``; its
+    timings."""
     env = dict(os.environ, PYTHONPATH=str(tree))
-    with tempfile.TemporaryDirectory(prefix="sweep_wall-") as tmp:
-        out = Path(tmp) / "sweep"
-        cmd = [sys.executable, "-m", "mdgran", "sweep", SWEEP, "--backend", "fast",
-               "--workers", str(workers), "--out", str(out), "--quiet"]
-        if quick:
-            cmd += ["--small", "--set", "run.duration=400"]
-        machine = {"load_before": list(os.getloadavg()), "busy_before": busy_processes()}
-        cpu0, t0 = children_cpu(), time.perf_counter()
-        res = subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True)
-        wall, cpu = time.perf_counter() - t0, children_cpu() - cpu0
-        machine["load_after"] = list(os.getloadavg())
-        if res.returncode != 0:
-            raise RuntimeError(f"{tree}: {' '.join(cmd)} failed: "
-                               f"{res.stderr.strip().splitlines()[-3:]}")
-        row = {"wall_s": wall, "cpu_s": cpu, **case_stats(out), **machine}
+    cmd = [sys.executable, "-m", "mdgran", "sweep", SWEEP, "--backend", "fast",
+           "--workers", str(workers), "--out", str(out), "--quiet"]
+    if quick:
+        cmd += ["--small", "--set", "run.duration=400"]
+    machine = {"load_before": list(os.getloadavg()), "busy_before": busy_processes()}
+    cpu0, t0 = children_cpu(), time.perf_counter()
+    res = subprocess.run(cmd, env=env, cwd=out.parent, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - t0, children_cpu() - cpu0
+    machine["load_after"] = list(os.getloadavg())
+    if res.returncode != 0:
+        raise RuntimeError(f"{tree}: {' '.join(cmd)} failed: "
+                           f"{res.stderr.strip().splitlines()[-3:]}")
+    row = {"wall_s": wall, "cpu_s": cpu, **case_stats(out), **machine}
     row["wall_over_kernels"] = wall * workers / row["kernel_sum_s"]
     row["cpu_over_kernels"] = cpu / row["kernel_sum_s"]
     return row
+
+
+def identity(a: Path, b: Path) -> dict:
+    """Case-by-case comparison of two folders of the sweep (reference/compare_sweeps.py)."""
+    sys.path.insert(0, str(AFTER / "reference"))
+    from compare_sweeps import compare_case
+
+    stems = sorted({p.stem for p in (a / "cases").glob("*.json")}
+                   | {p.stem for p in (b / "cases").glob("*.json")})
+    differing = {s: d for s in stems if (d := compare_case(a, b, s))}
+    return {"cases": len(stems), "identical": len(stems) - len(differing),
+            "differing": {s: d[:5] for s, d in differing.items()}}
 
 
 def summarize(rows: list) -> dict:
@@ -135,8 +152,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true",
                     help="the small grid (4 cases) at t = 400, one repeat")
     ap.add_argument("--repeats", type=int, default=None, help="default 1 (quick) or 2")
-    ap.add_argument("--workers", type=int, default=1,
-                    help="sweep worker processes (default 1: wall time = the cases' sum)")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1],
+                    help="sweep worker processes, one or more counts (default 1: wall time = "
+                    "the cases' sum)")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--note", default="", help="stored with the results (what the trees are)")
     args = ap.parse_args(argv)
@@ -150,23 +168,31 @@ def main(argv=None):
               "cpus_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
               else os.cpu_count(), "python": platform.python_version(),
               "load_at_start": list(os.getloadavg()), "busy_at_start": busy_processes(),
-              "runs": {k: [] for k in trees}}
+              "runs": {f"{k} W={w}": [] for w in args.workers for k in trees},
+              "identity": []}
     for tree in trees.values():  # compile / load the kernel's variants outside the timings
         subprocess.run([sys.executable, "-c", "from mdgran.scene import load_scene;"
                         "from mdgran.simulation import run;"
                         "run(load_scene('micro-star', [('run.duration', 1.0)]), 'fast')"],
                        env=dict(os.environ, PYTHONPATH=str(tree)), check=True, cwd="/tmp")
-    for _ in range(repeats):
-        for k, tree in trees.items():
-            row = one_sweep(tree, args.workers, args.quick)
-            result["runs"][k].append(row)
-            print(f"{k:6s}: {row['cases']} cases, wall {row['wall_s']:.1f} s (cpu "
-                  f"{row['cpu_s']:.1f} s), kernels {row['kernel_sum_s']:.2f} s, backends "
-                  f"{row['backend_sum_s']:.2f} s: wall x workers / kernels "
-                  f"{row['wall_over_kernels']:.2f}, cpu / kernels "
-                  f"{row['cpu_over_kernels']:.2f}; load {row['load_before'][0]:.2f} -> "
-                  f"{row['load_after'][0]:.2f}, {len(row['busy_before'])} busy processes",
-                  flush=True)
+    for rep in range(repeats):
+        for workers in args.workers:
+            with tempfile.TemporaryDirectory(prefix="sweep_wall-") as tmp:
+                for k, tree in trees.items():
+                    row = one_sweep(tree, workers, args.quick, Path(tmp) / k)
+                    result["runs"][f"{k} W={workers}"].append(row)
+                    print(f"{k:6s} W={workers}: {row['cases']} cases, wall {row['wall_s']:.1f} s "
+                          f"(cpu {row['cpu_s']:.1f} s), kernels {row['kernel_sum_s']:.2f} s, "
+                          f"backends {row['backend_sum_s']:.2f} s: wall x workers / kernels "
+                          f"{row['wall_over_kernels']:.2f}, cpu / kernels "
+                          f"{row['cpu_over_kernels']:.2f}; load {row['load_before'][0]:.2f} -> "
+                          f"{row['load_after'][0]:.2f}, {len(row['busy_before'])} busy "
+                          "processes", flush=True)
+                if len(trees) == 2:
+                    same = identity(Path(tmp) / "before", Path(tmp) / "after")
+                    result["identity"].append({"repeat": rep, "workers": workers, **same})
+                    print(f"identity W={workers}: {same['identical']} of {same['cases']} cases "
+                          "identical", flush=True)
     result["median"] = {k: summarize(v) for k, v in result["runs"].items()}
     result["load_at_end"] = list(os.getloadavg())
     result["busy_at_end"] = busy_processes()

@@ -52,6 +52,42 @@ def test_smoothing_spline_half_amplitude_at_smoothing_time():
         assert np.std(s[mid]) / np.std(y[mid]) == pytest.approx(gain, rel=0.01)
 
 
+@pytest.mark.parametrize("n", [5, 7, 4001])
+@pytest.mark.parametrize("lam", [0.0, 1e-3, 3.7, 1e4])
+def test_smoothing_spline_bitwise_scipys(n, lam):
+    """mdgran's copy of scipy's make_smoothing_spline (its penalty matrix computed by
+    columns together) gives scipy's spline bit for bit, on uniform and uneven samples."""
+    from scipy.interpolate import make_smoothing_spline as scipys
+
+    from mdgran.analysis.effective_damping import make_smoothing_spline
+
+    rng = np.random.default_rng(n)
+    y = np.cumsum(rng.standard_normal(n))
+    for x in (np.linspace(0.0, 400.0, n), np.cumsum(rng.random(n) + 0.01)):
+        ours, theirs = make_smoothing_spline(x, y, lam), scipys(x, y, lam=lam)
+        assert ours.k == theirs.k == 3
+        assert np.array_equal(ours.t, theirs.t) and np.array_equal(ours.c, theirs.c)
+        assert np.array_equal(ours.derivative()(x), theirs.derivative()(x))
+    with pytest.raises(ValueError, match="ascending"):
+        make_smoothing_spline(y[::-1] * 0.0, y, lam)
+
+
+def test_interior_extrema_as_scipys_argrelextrema():
+    """The envelopes' extrema are scipy.signal.argrelextrema's (order 1), ties, plateaus, NaNs,
+    short series and ends included."""
+    from scipy.signal import argrelextrema
+
+    from mdgran.analysis.effective_damping import interior_extrema
+
+    rng = np.random.default_rng(3)
+    series = [rng.integers(0, 4, 60).astype(float), rng.standard_normal(200),
+              np.array([1.0, 2.0, 2.0, 1.0, 3.0, np.nan, 0.0, 5.0, 1.0]), np.array([2.0, 1.0]),
+              np.array([1.0]), np.array([0.0, 1.0, 0.0])]
+    for y in series:
+        for comparator in (np.greater, np.less):
+            assert np.array_equal(interior_extrema(y, comparator), argrelextrema(y, comparator)[0])
+
+
 # ---- clusters ----------------------------------------------------------------------------------
 # n = 4 beads, fixed walls, contacts 1..5 (contact k joins bead k-1 and bead k), all closed at 0.
 EV_TIME = np.array([1.0, 2.0, 3.0, 5.0, 5.0])

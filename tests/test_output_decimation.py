@@ -14,7 +14,7 @@ import pytest
 from conftest import InterruptAt
 
 from mdgran.cli import main
-from mdgran.reporters import H5MDWriter, buffer_frames, chunk_shape
+from mdgran.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
 from mdgran.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import run
@@ -157,7 +157,7 @@ def test_chunks_and_buffer_by_bytes():
     assert chunk_shape((1000,), 8) == (262, 1000)
     # a 1e6-bead frame (x, v and 1 byte per contact = 17 MB): 3 frames in 64 MiB
     assert buffer_frames(16e6 + 1e6 + 1) == 3
-    assert buffer_frames(200.0) == 512 and buffer_frames(1e12) == 1
+    assert buffer_frames(200.0) == H5MD_BLOCK == 8192 and buffer_frames(1e12) == 1
 
 
 @pytest.mark.parametrize("key,value", [("output.bead_stride", "-1"),

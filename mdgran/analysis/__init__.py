@@ -83,6 +83,7 @@ def run_summary(traj, *, smoothing_time: float = SMOOTHING_TIME,
     ev_t, _ = reclustering_events(rc.history, merge_within)
     formed = int(rc.history.cumulative[-1]) if len(rc.history.cumulative) else 0
     tail = t >= t[0] + 0.9 * (t[-1] - t[0])
+    envelope = envelope_mean(t, kin)  # <<T>>, once for both decay times
     out = {
         "c_eff_max_segment": rc.segment_c_eff[rep] if rep >= 0 else None,
         "c_eff_max_segment_rate": rc.segment_rate[rep] if rep >= 0 else None,
@@ -97,8 +98,8 @@ def run_summary(traj, *, smoothing_time: float = SMOOTHING_TIME,
         "reclustering_rate_mean": formed / (ev_t[-1] - t[0]) if len(ev_t) else 0.0,
         "last_reclustering_time": ev_t[-1] if len(ev_t) else None,
         "kinetic_remaining": np.mean(kin[tail]) / kin[0] if kin[0] > 0 else None,
-        "kinetic_decay_time": decay_time(t, kin, math.exp(-1.0)),
-        "kinetic_decay_time_10": decay_time(t, kin, 0.1),
+        "kinetic_decay_time": decay_time(t, kin, math.exp(-1.0), envelope=envelope),
+        "kinetic_decay_time_10": decay_time(t, kin, 0.1, envelope=envelope),
         "characteristic_period": tc,
     }
     return {k: (None if v is None or not np.isfinite(v) else

@@ -19,7 +19,6 @@ only.  Peaks are ``scipy.signal.find_peaks`` maxima whose prominence is at least
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from .clusters import MERGE_WITHIN, analyze_reclustering
 from .effective_damping import SMOOTHING_TIME, effective_damping
@@ -37,6 +36,8 @@ def peak_times(t, y, prominence: float = 0.1, t_range=None) -> np.ndarray:
     span = float(np.nanmax(y) - np.nanmin(y)) if len(y) else 0.0
     if span <= 0:
         return np.array([])
+    from scipy.signal import find_peaks  # here: importing scipy.signal takes 0.6 s
+
     idx, _ = find_peaks(y, prominence=prominence * span)
     return t[idx]
 

@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import os
 import time as _time
+from functools import lru_cache
 
 import numba
 import numpy as np
@@ -71,6 +72,18 @@ def usable_threads(threads: int) -> int:
         threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
             else (os.cpu_count() or 1)
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+@lru_cache(maxsize=8)
+def contact_table(law, points: int | None, delta_max: float) -> tuple:
+    """``(ContactTable, its error())`` of ``law`` on ``points`` nodes (ContactTable's default
+    if None) up to ``delta_max`` (``p``), built once per process for each of them (the table
+    depends on these alone): a sweep's cases share their law, and the table and its error
+    took 20 ms of each case.  Shared: the caller must not change them.  (A chain of unlike
+    beads builds its pair laws' tables per run: up to 255 of them, too many to keep.)"""
+    table = (ContactTable(law, delta_max=delta_max) if points is None
+             else ContactTable(law, int(points), delta_max))
+    return table, table.error()
 
 
 class FastBackend(Backend):
@@ -106,8 +119,7 @@ class FastBackend(Backend):
             self.order = 1
         m = self.model
         law = m.law
-        self.table = (ContactTable(law, delta_max=delta_max) if table_points is None
-                      else ContactTable(law, int(table_points), delta_max))
+        self.table, table_error = contact_table(law, table_points, float(delta_max))
         table = fk.ForceTable(np.ascontiguousarray(self.table.f_coef, dtype=float),
                               float(self.table.base), float(self.table._scale),
                               float(self.table.n - 1), float(self.table._h))
@@ -133,7 +145,7 @@ class FastBackend(Backend):
                       "steps": 0, "events": 0, "event_substeps": 0,
                       "contact_eval": contact_eval, "wall_time_s": 0.0, "kernel_s": 0.0}
         if contact_eval == "table":
-            self.stats["table"] = self.table.error()
+            self.stats["table"] = dict(table_error)
 
     def _mix(self, points: int, delta_max: float, exact: bool) -> fk.Mix:
         """The kernel's :class:`~mdgran.backends.fast_kernel.Mix` of the scene's unlike beads:
