@@ -69,7 +69,7 @@ from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
-from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+from .base import ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
@@ -81,6 +81,9 @@ SHARE_SLOTS = 8
 #: (micro-star 1.85, macro-hertz 1.51, jkr/dmt-chain 1.9, hard/* 1.2-2.0, hard/violent-50
 #: 3.0), the fast backend's to 3 digits (the same method): its bound, 5x over 3.0
 LEDGER_C_LOCATED = 15.0
+#: scene features (base.scene_features) of fix mdgran/chain: initial velocities only (its
+#: contacts have one law, its beads mass 1 and no substrate damping); the hook runs them all
+NATIVE_FEATURES = frozenset({"thermal"})
 
 
 def _event_mode(events, contact):
@@ -172,6 +175,10 @@ class LammpsBackend(Backend):
                 self.plugin = native_plugin.plugin_path()
             except native_plugin.PluginUnavailable as exc:
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
+        self.supports = ALL_FEATURES if contact == "hook" else NATIVE_FEATURES
+        if contact == "native":
+            self.unsupported_hint = ("the Python hook does (contact='hook', backend spec "
+                                     "'lammps'), and the reference and fast backends")
         super().__init__(scene, **options)
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
@@ -248,6 +255,8 @@ class LammpsBackend(Backend):
         above the largest compression the contact table allows plus the initial gap, so that
         neighbours never pass each other (``delta_max = 100``: 128)."""
         delta_max = self.table.delta_max if self.table is not None else 100.0
+        if self.model.mixed:  # each table reaches delta_max in its contact's own units
+            delta_max = delta_max * float(np.max(self.model.mixture.length_scale))
         return 2.0 ** math.ceil(math.log2(delta_max + max(float(self.model.gap), 0.0) + 1.0))
 
     def _start_native(self, lmp):
@@ -288,6 +297,7 @@ class LammpsBackend(Backend):
                     "fix_modify contact energy yes"):
             lmp.command(cmd)
         self._events_read = 0
+        self._initial_state(lmp)  # thermal velocities (the fix reads v at its set-up)
         if self.table_file is not None and self.table is not None and self.rank == 0:
             self.table.write_lammps(self.table_file)
 
@@ -329,6 +339,9 @@ class LammpsBackend(Backend):
         self._kernel = lammps_hook
         self._par, self._ipar = lammps_hook.parameters(self.model, self.law, self.table, self.dt,
                                                        tether)
+        points = self.table.n if self.table is not None else None
+        self._mix = lammps_hook.mix_parameters(self.model, self._ipar, self.dt, points, tether)
+        self._initial_state(lmp)
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0
@@ -352,6 +365,34 @@ class LammpsBackend(Backend):
         # every call: 190 us per call under a load of 3; now 28 us under a load of 1)
         self._cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(self._callback)
         lmp.lib.lammps_set_fix_external_callback(lmp.lmp, b"contact", self._cfunc, None)
+
+    def _initial_state(self, lmp):
+        """Beyond the paper's start (unlike beads, initial random velocities): every owned
+        atom's mass (``fix property/atom rmass``: per-atom masses, which ``fix nve`` then
+        uses), displacement and velocity, by tag, from :meth:`ChainModel.initial_state` (the
+        static equilibrium of unlike beads between walls, the thermal velocities plus the
+        impulse): the same start as the reference and fast backends.  Called after ``d_x0``
+        holds the atoms' places on the line; the homogeneous chain is left as chain.in made it."""
+        m = self.model
+        if not (m.mixed or m.temperature):
+            return
+        d = self.scene.data
+        x_start, v_start, _ = m.initial_state(int(d["impulse"]["bead"]),
+                                              float(d["impulse"]["velocity"]))
+        first = 2 if self.walls else 1  # tag of bead 0
+        n = lmp.extract_setting("nlocal")
+        ex = lmp.numpy.extract_atom
+        bead = ex("id", nelem=n).astype(np.int64) - first
+        mobile = (bead >= 0) & (bead < m.n)
+        if m.mixed and not m.mixture.uniform_mass:
+            lmp.command("fix masses all property/atom rmass")
+            n = lmp.extract_setting("nlocal")
+            rmass = ex("rmass", nelem=n)
+            rmass[:] = 1.0
+            rmass[mobile] = m.mixture.mass[bead[mobile]]
+        x, v = ex("x", nelem=n, dim=3), ex("v", nelem=n, dim=3)
+        x[mobile, 0] += x_start[bead[mobile]]
+        v[mobile, 0] = v_start[bead[mobile]]
 
     def _buffers(self, nmax):
         """Scratch of the kernel, sized to LAMMPS's per-atom arrays (``nmax``)."""
@@ -402,7 +443,8 @@ class LammpsBackend(Backend):
                 nev, power, err, where, value = kernel.contact_step(
                     tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap, self._coef,
                     self._par, self._ipar, step, new_step, self._last_step is not None, self._u,
-                    self._w, self._fcon, self._left, self._pairs, npair, nown, self._ev)
+                    self._w, self._fcon, self._left, self._pairs, npair, nown, self._ev,
+                    self._mix)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:
@@ -413,7 +455,8 @@ class LammpsBackend(Backend):
             f[:, :] = 0.0
         if step % self._thermo_every == 0:  # contact energy for thermo (pe, f_contact)
             e = 0.0 if self._error is not None else kernel.contact_energy(
-                tag, nlocal, nall, self._tmap, closed, self._u, self._par, self._ipar)
+                tag, nlocal, nall, self._tmap, closed, self._u, self._par, self._ipar,
+                self._mix)
             if self._mpi is not None:
                 e = self._mpi.allreduce(e)
             self.lmp.fix_external_set_energy_global("contact", e)
