@@ -1,9 +1,9 @@
-"""Unlike beads, strikers, substrate damping and thermal velocities on the LAMMPS backend's
-Python hook (issue 17), against analytic results and the reference backend: second-order
-convergence to the reference where no contact switches, an unlike pair's restitution with its
-own loop energy, a striker's elastic collision, the same start as the other backends, the same
-run on two MPI ranks, and ``mdgran compare`` of reference, fast and LAMMPS on the built-in
-mixed scenes."""
+"""Unlike beads, strikers, substrate damping and thermal velocities on the LAMMPS backend, the
+Python hook and the native contact (issue 17), against analytic results and the reference
+backend: second-order convergence to the reference where no contact switches, an unlike pair's
+restitution with its own loop energy, a striker's elastic collision, the same start as the other
+backends, the hook and the native contact bitwise in the mode they share, the same run on two MPI
+ranks, and ``mdgran compare`` of reference, fast and LAMMPS on the built-in mixed scenes."""
 import math
 import shutil
 import subprocess
@@ -26,13 +26,18 @@ pytestmark = pytest.mark.lammps
 MPIEXEC = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
 
 
-@pytest.mark.parametrize("name, overrides", [
+MIXED_SMALL = [
     ("mixed/dimer", [("run.duration", 10.0), ("substrate.damping", 0.05),
                      ("thermal.temperature", 1e-4)]),
     ("mixed/striker", [("run.duration", 1.4), ("substrate.damping", 0.05)]),  # g = 0, mass 8
-])
-def test_hook_is_second_order_to_the_reference_without_events(name, overrides):
-    """A small impulse (0.05): no contact switches, so the hook's velocity Verlet is second
+]
+
+
+@pytest.mark.parametrize("spec", ["lammps", "lammps:native"])
+@pytest.mark.parametrize("name, overrides", MIXED_SMALL)
+def test_second_order_to_the_reference_without_events(spec, name, overrides):
+    """A small impulse (0.05): no contact switches, so the hook's velocity Verlet (and the
+    native contact's, events located) is second
     order; its difference from the reference (tol 1e-12) falls 4x per halving of dt (each
     pair's law, the masses, the substrate factors, both dampings).  The start is the
     reference's: the dimer's static equilibrium (to LAMMPS's resolution of x on its line,
@@ -43,7 +48,7 @@ def test_hook_is_second_order_to_the_reference_without_events(name, overrides):
     assert len(ref.ev_kind) == 0
     errs = []
     for dt in (0.005, 0.0025):
-        tr = run(sc, "lammps", set={"run.dt": dt}).trajectory
+        tr = run(sc, spec, set={"run.dt": dt}).trajectory
         assert len(tr.ev_kind) == 0
         errs.append(np.abs(tr.x - ref.x).max())
         assert np.abs(tr.x[0] - ref.x[0]).max() < 1e-11
@@ -54,6 +59,46 @@ def test_hook_is_second_order_to_the_reference_without_events(name, overrides):
         assert np.abs(ref.x[0]).max() > 1e-3  # the equilibrium is not x = 0
     order = math.log2(errs[0] / errs[1])
     assert errs[1] < 1e-5 and 1.8 < order < 3.2, (errs, order)
+
+
+@pytest.mark.parametrize("name, overrides", [
+    *MIXED_SMALL,
+    ("mixed/intruder", [("run.duration", 20.0)]),  # snap-offs, table
+    ("mixed/dimer", [("run.duration", 10.0), ("contact.fc", -1.5)]),  # one law, exact
+    ("mixed/striker", [("run.duration", 20.0), ("contact.law", "hertz"),
+                       ("substrate.k3", 0.01)]),  # Hertz pairs, cubic substrate, snap-offs
+])
+def test_hook_and_native_quantized_are_bitwise_equal(name, overrides):
+    """Unlike beads in the mode the hook and the native contact share (events quantized):
+    the same positions, velocities, events and ledger bit for bit (each contact's law, table,
+    threshold and energy, the masses, substrate factors and both dampings, the same operations
+    in the same order)."""
+    options = {"contact_eval": "exact"} if ("contact.fc", -1.5) in overrides else {}
+    sc = load_scene(name, overrides)
+    hook = run(sc, "lammps", **options)
+    native = run(sc, "lammps:native:quantized", **options)
+    ta, tb = hook.trajectory, native.trajectory
+    assert np.array_equal(ta.x, tb.x) and np.array_equal(ta.v, tb.v)
+    assert list(zip(ta.ev_contact, ta.ev_kind)) == list(zip(tb.ev_contact, tb.ev_kind))
+    assert np.array_equal(ta.ev_time, tb.ev_time)
+    for key in ta.ledger:
+        assert np.array_equal(ta.ledger[key], tb.ledger[key]), key
+    if name == "mixed/intruder":
+        assert len(ta.ev_kind) > 0
+
+
+def test_native_located_is_second_order_to_the_unlike_pair_restitution():
+    """The native contact, events located: the unlike pair's velocities after its snap-off
+    approach the analytic ones at second order in dt, its loss the pair's own ``A L W``."""
+    w_pair, v1, v2 = unlike_pair_after()
+    errs = []
+    for dt in (0.02, 0.01, 0.005):
+        tr = run(unlike_pair_scene(dt), "lammps:native").trajectory
+        assert list(tr.ev_kind) == [0]
+        assert tr.ledger["dissipated_hysteresis"][-1] == pytest.approx(w_pair, rel=1e-12)
+        errs.append(max(abs(tr.v[-1, 0] - v1), abs(tr.v[-1, 1] - v2)))
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert errs[-1] < 1e-4 and np.all(orders > 1.8), (errs, orders)
 
 
 def test_hook_unlike_pair_restitution():
@@ -71,8 +116,9 @@ def test_hook_unlike_pair_restitution():
         assert max(abs(tr.v[-1, 0] - v1), abs(tr.v[-1, 1] - v2)) < 3.0 * dt
 
 
+@pytest.mark.parametrize("spec", ["lammps", "lammps:native"])
 @pytest.mark.parametrize("d_striker, density", [(1.5, 1.0), (0.7, 2.5)])
-def test_hook_striker_on_free_hertz_pair(d_striker, density):
+def test_striker_on_free_hertz_pair(spec, d_striker, density):
     """A striker (per-atom mass ``density d^3``) on a free Hertz bead: the elastic collision's
     velocities, ``(m1 - 1) / (m1 + 1) v0`` and ``2 m1 / (m1 + 1) v0`` (dt 1e-3)."""
     v0, m1 = 2.0, density * d_striker**3
@@ -80,7 +126,7 @@ def test_hook_striker_on_free_hertz_pair(d_striker, density):
                     substrate={"k1": 0.0}, impulse={"velocity": v0},
                     striker={"diameter": d_striker, "density": density},
                     run={"duration": 30.0, "output_interval": 1.0, "dt": 1e-3})
-    tr = run(sc, "lammps").trajectory
+    tr = run(sc, spec).trajectory
     assert tr.v[-1, 0] == pytest.approx((m1 - 1) / (m1 + 1) * v0, abs=1e-5)
     assert tr.v[-1, 1] == pytest.approx(2 * m1 / (m1 + 1) * v0, abs=1e-5)
 
@@ -98,11 +144,12 @@ def test_thermal_start_on_lammps(spec):
     assert tr.ledger["kinetic_energy"][0] == pytest.approx(0.5 * v @ v, rel=1e-14)
 
 
-def test_two_ranks_run_the_mixed_chain_as_one(tmp_path):
+@pytest.mark.parametrize("spec", ["lammps", "lammps:native"])
+def test_two_ranks_run_the_mixed_chain_as_one(spec, tmp_path):
     """mpiexec -n 2 on the dimer with substrate damping and thermal velocities: positions,
     velocities, events and D_hysteresis those of one rank bit for bit (per-atom masses and the
     equilibrium start set on each rank's atoms); D_viscous summed per rank (round-off)."""
-    args = ["-m", "mdgran", "run", "mixed/dimer", "--backend", "lammps", "--quiet",
+    args = ["-m", "mdgran", "run", "mixed/dimer", "--backend", spec, "--quiet",
             "--checkpoint", "0", "--set", "run.duration=5", "--set", "substrate.damping=0.01",
             "--set", "thermal.temperature=0.01", "--out"]
     two, one = tmp_path / "two.h5", tmp_path / "one.h5"
@@ -122,17 +169,20 @@ def test_two_ranks_run_the_mixed_chain_as_one(tmp_path):
         np.testing.assert_allclose(b[key][()], a[key][()], rtol=1e-12, atol=1e-12)
 
 
-def test_compare_passes_reference_fast_and_lammps_on_the_dimer(tmp_path):
-    """``mdgran compare`` of reference, fast and the LAMMPS hook on the dimer scene to t = 60:
-    each backend within its error estimate of the reference to the horizon, events matched,
-    ledgers within bounds, cluster statistics past the horizon."""
+@pytest.mark.parametrize("name, backends", [
+    ("mixed/dimer", ("reference", "fast", "lammps", "lammps:native")),
+    ("mixed/intruder", ("reference", "fast", "lammps:native")),  # the hook: see below
+])
+def test_compare_passes_reference_fast_and_lammps_on_mixed_scenes(name, backends, tmp_path):
+    """``mdgran compare`` of reference, fast and LAMMPS on the dimer and intruder scenes to
+    t = 60: each backend within its error estimate of the reference to the horizon, events
+    matched, ledgers within bounds, cluster statistics past the horizon."""
     from mdgran.compare import compare
 
-    rep = compare(load_scene("mixed/dimer", [("run.duration", 60.0)]),
-                  ("reference", "fast", "lammps"), out_dir=tmp_path)
+    rep = compare(load_scene(name, [("run.duration", 60.0)]), backends, out_dir=tmp_path)
     failed = [c for c in rep["criteria"] if not c["passed"]]
     assert not failed, failed
-    assert rep["pairs"]["lammps"]["events_compared"] >= 3
+    assert rep["pairs"]["lammps:native"]["events_compared"] >= 3
 
 
 @pytest.mark.parametrize("name", ["mixed/dimer", "mixed/intruder"])
@@ -140,7 +190,10 @@ def test_hook_is_the_fast_backends_quantized_method(name):
     """The hook and the fast backend with step-quantized events (``fast:quantized``, its own
     kernel and ``Mix`` record) integrate the same equations by the same method: to t = 30 the
     same events, 1e-4 apart in time, and trajectories 1e-3 p apart where each is 2e-2 p or
-    more from the reference (the method's error: its snap-offs switch at step ends)."""
+    more from the reference (the method's error: its snap-offs switch at step ends).  On the
+    intruder this error outgrows the method's own estimate (its runs at dt and dt/2 differ by
+    less) after a slow closing at t = 13.9, so ``mdgran compare`` fails the hook's trajectory
+    there (0.043 p against a threshold of 0.012), as it fails ``fast:quantized``'s."""
     sc = load_scene(name, [("run.duration", 30.0)])
     hook = run(sc, "lammps").trajectory
     quantized = run(sc, "fast:quantized").trajectory

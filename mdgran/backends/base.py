@@ -131,8 +131,6 @@ class Backend:
     #: the scene features beyond the paper's chain (:func:`scene_features`) that the backend
     #: runs; it refuses a scene with any other before running
     supports: frozenset = frozenset()
-    #: who runs the features this backend does not (the end of its refusal's line)
-    unsupported_hint: str = "the reference and fast backends do"
 
     def __init__(self, scene, **options):
         from ..chain import model_from_scene
@@ -147,8 +145,8 @@ class Backend:
         missing = [f for f in scene_features(scene, self.model) if f[0] not in self.supports]
         if missing:
             _, key, what = missing[0]
-            raise SceneError(key, f"backend {self.name!r} does not run {what} yet; "
-                             + self.unsupported_hint)
+            raise SceneError(key, f"backend {self.name!r} does not run {what} yet; the "
+                             "reference and fast backends do")
         if self.model.mixed:  # refused here, before a run, if the chain has no equilibrium
             self.model.initial_state(1, 0.0)
         self.options = options

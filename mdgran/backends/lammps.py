@@ -48,6 +48,14 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
+* **Unlike beads, strikers, substrate damping, thermal velocities** (issue 17): the hook's
+  :class:`~mdgran.backends.lammps_hook.HookMix` and the fix's ``mixture FILE`` and
+  ``sub_damping C`` give each contact its pair's law ``A f(delta / L)`` and each bead its mass
+  and substrate factor; LAMMPS's integrator gets the masses as per-atom masses (``fix
+  property/atom rmass``); every rank sets its atoms' initial displacements (the equilibrium of
+  unlike beads between walls) and velocities (thermal plus impulse) from
+  :meth:`ChainModel.initial_state` (:meth:`LammpsBackend._initial_state`).  The homogeneous
+  chain takes none of these branches.
 * **Located events** (``events="located"``, the default with the native contact): the fix
   integrates the chain itself (``fix move`` and ``fix substrate`` go) and splits each step at
   its earliest contact event over all ranks, as the fast backend does: second order in dt
@@ -81,9 +89,6 @@ SHARE_SLOTS = 8
 #: (micro-star 1.85, macro-hertz 1.51, jkr/dmt-chain 1.9, hard/* 1.2-2.0, hard/violent-50
 #: 3.0), the fast backend's to 3 digits (the same method): its bound, 5x over 3.0
 LEDGER_C_LOCATED = 15.0
-#: scene features (base.scene_features) of fix mdgran/chain: initial velocities only (its
-#: contacts have one law, its beads mass 1 and no substrate damping); the hook runs them all
-NATIVE_FEATURES = frozenset({"thermal"})
 
 
 def _event_mode(events, contact):
@@ -159,6 +164,8 @@ class LammpsBackend(Backend):
     #: dt = 0.0025), micro-star 0.42 (dt = 0.0025) and 0.17 (0.01), the other hard cases
     #: 0.01-0.51 at dt = 0.01: 4x margin (3x at dt = 0.01, where the cap binds)
     ledger_c = {1: 4.0, 2: LEDGER_C_LOCATED}
+    #: unlike beads, strikers, thermal velocities, substrate damping: hook and native contact
+    supports = ALL_FEATURES
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
                  table_file=None, extra_commands=(), contact="hook", events=None, **options):
@@ -175,10 +182,6 @@ class LammpsBackend(Backend):
                 self.plugin = native_plugin.plugin_path()
             except native_plugin.PluginUnavailable as exc:
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
-        self.supports = ALL_FEATURES if contact == "hook" else NATIVE_FEATURES
-        if contact == "native":
-            self.unsupported_hint = ("the Python hook does (contact='hook', backend spec "
-                                     "'lammps'), and the reference and fast backends")
         super().__init__(scene, **options)
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
@@ -275,11 +278,18 @@ class LammpsBackend(Backend):
                 f"k1 {float(m.k1)!r}", f"k3 {float(m.k3)!r}", f"gap {float(m.gap)!r}",
                 f"walls {'yes' if self.walls else 'no'}",
                 f"closed {'yes' if m.gap <= 0 else 'no'}"]
-        if self.table is not None:  # every rank writes its own copy (no shared file system)
-            self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+        # every rank writes its own copies (no shared file system)
+        self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+        if self.table is not None:
             path = Path(self._tmpdir.name) / "contact.spline"
             native_plugin.write_spline(self.table, path)
             args.append(f"table {path}")
+        if m.mixed:
+            points = self.table.n if self.table is not None else None
+            path = native_plugin.write_mixture(m, Path(self._tmpdir.name), points)
+            args.append(f"mixture {path}")
+        if m.substrate_damping:
+            args.append(f"sub_damping {float(m.substrate_damping)!r}")
         from .lammps_hook import tether_stiffness
 
         setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
