@@ -351,6 +351,8 @@ class LammpsBackend(Backend):
                                                        tether)
         points = self.table.n if self.table is not None else None
         self._mix = lammps_hook.mix_parameters(self.model, self._ipar, self.dt, points, tether)
+        self._extended = bool(self._ipar[lammps_hook.I_MIXED] or
+                              self._ipar[lammps_hook.I_SUB_DAMPED])
         self._initial_state(lmp)
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
@@ -450,11 +452,18 @@ class LammpsBackend(Backend):
                 if missing >= 0:
                     raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
                                              step)
-                nev, power, err, where, value = kernel.contact_step(
-                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap, self._coef,
-                    self._par, self._ipar, step, new_step, self._last_step is not None, self._u,
-                    self._w, self._fcon, self._left, self._pairs, npair, nown, self._ev,
-                    self._mix)
+                if self._extended:  # unlike beads or substrate damping
+                    nev, power, err, where, value = kernel.contact_step_mixed(
+                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
+                        self._coef, self._par, self._ipar, step, new_step,
+                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
+                        self._pairs, npair, nown, self._ev, self._mix)
+                else:
+                    nev, power, err, where, value = kernel.contact_step(
+                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
+                        self._coef, self._par, self._ipar, step, new_step,
+                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
+                        self._pairs, npair, nown, self._ev)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:

@@ -294,25 +294,38 @@ def unpack_aprev(tag, nlocal, nall, tmap, aprev, buf):
 # ---- one step --------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev, mix, jt):
-    """Event of contact ``l`` (left tag ``jt``) at this step (rare: out of the hot loop): its
-    time by linear interpolation of ``delta`` within the step and, on opening, the energy lost
-    (unlike beads: the contact's own threshold and energy, :class:`HookMix`)."""
+def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev):
+    """Event of contact ``l`` at this step (rare: out of the hot loop): its time by linear
+    interpolation of ``delta`` within the step and, on opening, the energy lost."""
     dt = par[P_DT]
     t = step * dt
     prev = dprev[l] if have_last else delta
-    mixed = ipar[I_MIXED] != 0
-    thr = (mix.delta_off[jt] if mixed else par[P_DELTA_OFF]) if opening else 0.0
+    thr = par[P_DELTA_OFF] if opening else 0.0
     span = prev - delta
     frac = (prev - thr) / span if span != 0.0 else 1.0
     te = t - dt + min(max(frac, 0.0), 1.0) * dt if step > 0 else t
     events[nev, 0] = l
     events[nev, 1] = 0.0 if opening else 1.0
     events[nev, 2] = te
-    lost = 0.0
-    if opening:
-        lost = mixed_energy(mix, ipar, jt, delta) if mixed else law_energy(par, ipar, delta)
-    events[nev, 3] = lost
+    events[nev, 3] = law_energy(par, ipar, delta) if opening else 0.0
+    return nev + 1
+
+
+@njit(cache=True)
+def _record_mixed(l, opening, delta, step, have_last, par, ipar, dprev, events, nev, mix, jt):
+    """:func:`_record` of the unlike contact with left tag ``jt``: its own threshold and lost
+    energy ``A L V(delta / L)`` (:class:`HookMix`)."""
+    dt = par[P_DT]
+    t = step * dt
+    prev = dprev[l] if have_last else delta
+    thr = mix.delta_off[jt] if opening else 0.0
+    span = prev - delta
+    frac = (prev - thr) / span if span != 0.0 else 1.0
+    te = t - dt + min(max(frac, 0.0), 1.0) * dt if step > 0 else t
+    events[nev, 0] = l
+    events[nev, 1] = 0.0 if opening else 1.0
+    events[nev, 2] = te
+    events[nev, 3] = mixed_energy(mix, ipar, jt, delta) if opening else 0.0
     return nev + 1
 
 
@@ -383,18 +396,15 @@ def _list_contacts(tag, nlocal, nall, closed, tmap, ntags, left, fcon, pairs):
 
 
 @njit(inline="always")
-def _contact_forces(tag, pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, step,
-                    new_step, have_last, fcon, events, mix):
+def _contact_forces(pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, step, new_step,
+                    have_last, fcon, events):
     """Each listed contact: at a new step its state update (step-quantized: a closed contact
     at or past ``delta_off`` opens, an open one at or past 0 closes; strict inequalities where
     ``delta_off = 0``), then its force ``f(delta) + c d(delta)/dt`` (closed) or 0 into
-    ``fcon[left atom]``; unlike beads (``I_MIXED``): the contact's own threshold and law
-    ``A f(delta / L)`` (:class:`HookMix`), its table's range checked in its own units.
-    Returns ``(events, sum rate^2 of owned closed contacts, error code, its local index, its
-    value)``."""
+    ``fcon[left atom]``.  Returns ``(events, sum rate^2 of owned closed contacts, error code,
+    its local index, its value)``."""
     gap, damping, delta_off = par[P_GAP], par[P_DAMPING], par[P_DELTA_OFF]
     strict, table = ipar[I_STRICT], ipar[I_TABLE]
-    mixed = ipar[I_MIXED] != 0
     nev = 0
     rate2 = 0.0
     for k in range(npair):
@@ -405,10 +415,6 @@ def _contact_forces(tag, pairs, npair, nown, u, w, closed, dprev, coef, par, ipa
         if gap != 0.0:
             delta = delta - gap
         rate = w[l] - w[r]
-        jt = tag[l]
-        if mixed:
-            delta_off = mix.delta_off[jt]
-            strict = delta_off == 0.0
         if new_step:
             c = closed[l] != 0
             if strict:
@@ -420,25 +426,73 @@ def _contact_forces(tag, pairs, npair, nown, u, w, closed, dprev, coef, par, ipa
             if opening or closing:
                 if own:
                     nev = _record(l, opening, delta, step, have_last, par, ipar, dprev, events,
-                                  nev, mix, jt)
+                                  nev)
                 closed[l] = 0 if opening else 1
             if own:
                 dprev[l] = delta
-        if mixed:
-            if table and delta * mix.inv_len[jt] > mix.cpar[mix.cls[jt], P_DELTA_MAX]:
-                return nev, rate2, BEYOND_TABLE, l, delta * mix.inv_len[jt]
-        elif table and delta > par[P_DELTA_MAX]:
+        if table and delta > par[P_DELTA_MAX]:
             return nev, rate2, BEYOND_TABLE, l, delta
         F = 0.0
         if closed[l] != 0:
             if not math.isfinite(delta):
                 F = math.nan
-            elif mixed:
-                F = mixed_force(mix, ipar, jt, delta)
             elif table:
                 F = spline_force(coef, par, delta)
             else:
                 F = exact_force(par, ipar, delta)
+            if damping != 0.0:
+                F = F + damping * rate
+                if own and new_step:
+                    rate2 += rate * rate
+        fcon[l] = F
+    return nev, rate2, OK, -1, 0.0
+
+
+@njit(inline="always")
+def _contact_forces_mixed(tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step,
+                          new_step, have_last, fcon, events, mix):
+    """:func:`_contact_forces` of unlike beads (``I_MIXED``): each contact (left tag ``jt``)
+    with its own threshold (strict inequalities where it is 0) and law ``A f(delta / L)``
+    (:class:`HookMix`), its table's range checked in its own units (the value returned with
+    ``BEYOND_TABLE`` is in those units)."""
+    gap, damping = par[P_GAP], par[P_DAMPING]
+    table = ipar[I_TABLE]
+    nev = 0
+    rate2 = 0.0
+    for k in range(npair):
+        l = pairs[k, 0]
+        r = pairs[k, 1]
+        own = k < nown
+        delta = u[l] - u[r]
+        if gap != 0.0:
+            delta = delta - gap
+        rate = w[l] - w[r]
+        jt = tag[l]
+        delta_off = mix.delta_off[jt]
+        if new_step:
+            c = closed[l] != 0
+            if delta_off == 0.0:
+                opening = c and delta < 0.0
+                closing = (not c) and delta > 0.0
+            else:
+                opening = c and delta <= delta_off
+                closing = (not c) and delta >= 0.0
+            if opening or closing:
+                if own:
+                    nev = _record_mixed(l, opening, delta, step, have_last, par, ipar, dprev,
+                                        events, nev, mix, jt)
+                closed[l] = 0 if opening else 1
+            if own:
+                dprev[l] = delta
+        own_delta = delta * mix.inv_len[jt]
+        if table and own_delta > mix.cpar[mix.cls[jt], P_DELTA_MAX]:
+            return nev, rate2, BEYOND_TABLE, l, own_delta
+        F = 0.0
+        if closed[l] != 0:
+            if not math.isfinite(delta):
+                F = math.nan
+            else:
+                F = mixed_force(mix, ipar, jt, delta)
             if damping != 0.0:
                 F = F + damping * rate
                 if own and new_step:
@@ -527,8 +581,7 @@ def contact_list(tag, nlocal, nall, closed, tmap, ipar, left, fcon, pairs):
 
 @njit(cache=True)
 def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef, par,
-                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events,
-                 mix):
+                 ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown, events):
     """Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column;
     y, z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
     events.
@@ -538,27 +591,50 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
     (``>= nall``) are scratch; ``events`` (``>= nlocal`` rows) receives ``[local index of the
     left atom, kind (1 close, 0 open), time, energy lost]``.  Returns ``(number of events,
     damping power c sum rate^2 over this rank's contacts, error code, its local index, its
-    value)``.  ``mix``: the :class:`HookMix` of unlike beads or a damped substrate (flags
-    ``I_MIXED``, ``I_SUB_DAMPED``; :func:`no_mix` otherwise, never read); its substrate
-    damping's power is added to the returned one.
+    value)``.
 
     Three passes, each a function the compiler inlines (``inline="always"``): a call it does
     not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
     per contact, three times the contact's own work; only an event calls out
     (:func:`_record`)."""
     _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
-    nev, rate2, code, where, value = _contact_forces(tag, pairs, npair, nown, u, w, closed,
-                                                     dprev, coef, par, ipar, step, new_step,
-                                                     have_last, fcon, events, mix)
+    nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed, dprev,
+                                                     coef, par, ipar, step, new_step,
+                                                     have_last, fcon, events)
     if code != OK:
         return nev, rate2, code, where, value
-    sub_power = 0.0
-    if ipar[I_MIXED] != 0 or ipar[I_SUB_DAMPED] != 0:
-        code, where, value, sub_power = _bead_forces_mixed(tag, nlocal, left, fcon, u, w, par,
-                                                           ipar, new_step, fext, aprev, mix)
+    code, where, value = _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext,
+                                      aprev)
+    damping = par[P_DAMPING]
+    power = damping * rate2 if damping != 0.0 else 0.0
+    if code != OK:
+        return nev, rate2, code, where, value
+    return nev, power, OK, -1, 0.0
+
+
+@njit(cache=True)
+def contact_step_mixed(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef,
+                       par, ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown,
+                       events, mix):
+    """:func:`contact_step` of unlike beads or a damped substrate (flags ``I_MIXED``,
+    ``I_SUB_DAMPED``; ``mix`` their :class:`HookMix`): each contact its own law
+    (:func:`_contact_forces_mixed`, or the chain's where only the substrate is damped), each
+    bead its mass, substrate factor and substrate damping (:func:`_bead_forces_mixed`), whose
+    power is added to the returned one.  A function of its own, so that the homogeneous
+    chain's :func:`contact_step` is compiled as before."""
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
+    if ipar[I_MIXED] != 0:
+        nev, rate2, code, where, value = _contact_forces_mixed(
+            tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step, new_step, have_last,
+            fcon, events, mix)
     else:
-        code, where, value = _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step,
-                                          fext, aprev)
+        nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed,
+                                                         dprev, coef, par, ipar, step,
+                                                         new_step, have_last, fcon, events)
+    if code != OK:
+        return nev, rate2, code, where, value
+    code, where, value, sub_power = _bead_forces_mixed(tag, nlocal, left, fcon, u, w, par,
+                                                       ipar, new_step, fext, aprev, mix)
     damping = par[P_DAMPING]
     power = damping * rate2 if damping != 0.0 else 0.0
     if ipar[I_SUB_DAMPED] != 0:

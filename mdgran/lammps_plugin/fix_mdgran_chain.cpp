@@ -500,7 +500,15 @@ void FixMdgranChain::post_force(int /*vflag*/)
   else compute(update->ntimestep);
 }
 
+// The step of events quantized: the chain's one law (MIX false, the code every homogeneous
+// run takes), or each contact's own (MIX: unlike beads), chosen once per call.
 void FixMdgranChain::compute(bigint step)
+{
+  if (mixed) compute_t<true>(step);
+  else compute_t<false>(step);
+}
+
+template <bool MIX> void FixMdgranChain::compute_t(bigint step)
 {
   const int new_step = !have_last || step != last_step;
   ncompute++;
@@ -541,13 +549,13 @@ void FixMdgranChain::compute(bigint step)
   // a switch of contact l at this step (rare): its event time and lost energy, on the owner
   auto record = [&](int l, double delta, int opening) __attribute__((noinline)) {
     double prev = have_last ? dprev[l] : delta;
-    double thr = opening ? off_of(tag[l]) : 0.0;
+    double thr = opening ? (MIX ? m_delta_off[tag[l]] : delta_off) : 0.0;
     double span = prev - delta;
     double frac = span != 0.0 ? (prev - thr) / span : 1.0;
     double te = step > 0 ? t - dt + std::min(std::max(frac, 0.0), 1.0) * dt : t;
     found.push_back({step, tag[l], opening ? 0 : 1, te});
     double e = 0.0;
-    if (opening) e = mixed ? mixed_energy(tag[l], delta) : law_energy(delta);
+    if (opening) e = MIX ? mixed_energy(tag[l], delta) : law_energy(delta);
     lost.push_back(e);
   };
   auto overflow = [&](int l, double delta) __attribute__((noinline)) {
@@ -562,7 +570,7 @@ void FixMdgranChain::compute(bigint step)
     double rate = w_[l] - w_[r];
     double off = delta_off_;
     int strict_ = strict;
-    if (mixed) {    // unlike beads: the contact's own threshold and table range
+    if constexpr (MIX) {    // unlike beads: the contact's own threshold and table range
       const tagint jt = tag[l];
       off = m_delta_off[jt];
       strict_ = off == 0.0;
@@ -580,10 +588,10 @@ void FixMdgranChain::compute(bigint step)
       }
       if (own) dprev_[l] = delta;
     }
-    if (!mixed && use_table && delta > tab_delta_max) overflow(l, delta);
+    if (!MIX && use_table && delta > tab_delta_max) overflow(l, delta);
     double F = 0.0;
     if (closed_[l] != 0.0) {
-      if (mixed) F = mixed_force(tag[l], delta, 0);
+      if constexpr (MIX) F = mixed_force(tag[l], delta, 0);
       else F = use_table ? spline_force(delta) : exact_force(delta);
       if (damping_ != 0.0) F = F + damping_ * rate;
       if (own && new_step && damping_ != 0.0) power += rate * rate;
@@ -898,6 +906,13 @@ void FixMdgranChain::drift(double h, int start)
 // over the atoms (a separate kick loop cost ~15% of a step, memory traffic).
 void FixMdgranChain::accelerate(double h, int last)
 {
+  if (extended) accelerate_t<true>(h, last);
+  else accelerate_t<false>(h, last);
+}
+
+// accelerate of the homogeneous chain (EXT false) or of unlike beads or a damped substrate
+template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
+{
   double *v = flat(atom->v), *f = flat(atom->f);
   double *const aprev_ = aprev;    // members as locals (see located_pass)
   const double *const fcon_ = fcon, *const fkick_ = fkick, *const u_ = u, *const w_ = w;
@@ -912,7 +927,7 @@ void FixMdgranChain::accelerate(double h, int last)
     a = fl - fcon_[i];
     av = fvl - fkick_[i];
     double sub = k1_ * u_[i] + k3_ * u_[i] * u_[i] * u_[i];    // substrate: k1 u + k3 u^3
-    if (extended) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
+    if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
       const tagint t = atom->tag[i];
       sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * w_[i]);
       const double im = mixed ? m_inv_mass[t] : 1.0;
@@ -954,6 +969,12 @@ void FixMdgranChain::accelerate(double h, int last)
 // P = c sum (d delta/dt)^2 over its own closed contacts.
 double FixMdgranChain::located_pass(double h)
 {
+  return mixed ? located_pass_t<true>(h) : located_pass_t<false>(h);
+}
+
+// located_pass with the chain's one law (MIX false) or each contact's own (unlike beads)
+template <bool MIX> double FixMdgranChain::located_pass_t(double h)
+{
   ncompute++;
   const int nall = atom->nlocal + atom->nghost;
   tagint *tag = atom->tag;
@@ -987,7 +1008,7 @@ double FixMdgranChain::located_pass(double h)
     double F = 0.0, Fv = 0.0, g, gd;
     if (closed_[c.l] != 0.0) {
       double off = delta_off_;
-      if (mixed) {
+      if constexpr (MIX) {
         off = mixed_located(c, d, h, F, Fv);
       } else {
         if (use_table && d > tab_delta_max)
@@ -1020,7 +1041,7 @@ double FixMdgranChain::located_pass(double h)
   if (sub_damping != 0.0)    // the substrate's damping power, g c_s w^2 of the moving beads
     for (size_t q = 0; q < runs.size(); q += 2)
       for (int i = runs[q]; i < runs[q + 1]; i++)
-        power += (mixed ? m_on_site[tag[i]] : 1.0) * (sub_damping * w_[i] * w_[i]);
+        power += (MIX ? m_on_site[tag[i]] : 1.0) * (sub_damping * w_[i] * w_[i]);
   return power;
 }
 

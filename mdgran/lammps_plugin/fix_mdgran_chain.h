@@ -163,6 +163,8 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double drift_h;                           // h of the drift that left the owned atoms' u, w
                                             // for the next pass (-1: none)
   double located_pass(double h);
+  template <bool MIX> double located_pass_t(double h);
+  template <bool EXT> void accelerate_t(double h, int last);
   void drift(double h, int start);
   void accelerate(double h, int last);
   void located_step();
@@ -181,6 +183,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   static double *flat(double **a) { return a ? a[0] : nullptr; }
 
   void compute(bigint step);
+  template <bool MIX> void compute_t(bigint step);
   void sync();
   tagint ntags;                             // atom->natoms: the last tag (a wall with walls)
   inline int is_wall(tagint t) const { return walls && (t == 1 || t == ntags); }
