@@ -229,14 +229,21 @@ def mixed_energy(mix, ipar, jt, d):
 
 
 @njit(inline="always")
-def mixed_force(mix, ipar, jt, d):
-    """Force of the closed unlike contact with left tag ``jt`` at compression ``d``: ``A f(d /
-    L)`` (units eta0), from its class's table or exact law."""
-    c = mix.cls[jt]
-    u = d * mix.inv_len[jt]
-    if ipar[I_TABLE]:
-        return mix.scale[jt] * spline_force(mix.coef[c], mix.cpar[c], u)
-    return mix.scale[jt] * exact_force(mix.cpar[c], ipar, u)
+def class_spline_force(coef, cpar, c, d):
+    """:func:`spline_force` of law class ``c`` (``coef[c]``, ``cpar[c]``), indexing the
+    class's rows in place (no view of them per contact)."""
+    w = math.sqrt(max(d - cpar[c, P_BASE], 0.0))
+    s = min(w * cpar[c, P_SCALE], cpar[c, P_TOP])
+    i = int(s)
+    x = (s - i) * cpar[c, P_H]
+    return ((coef[c, i, 0] * x + coef[c, i, 1]) * x + coef[c, i, 2]) * x + coef[c, i, 3]
+
+
+@njit(cache=True)
+def class_exact_force(cpar, ipar, c, u):
+    """:func:`exact_force` of law class ``c`` at own-units compression ``u`` (the view of the
+    class's row made here, out of the contact loop)."""
+    return exact_force(cpar[c], ipar, u)
 
 
 # ---- atoms by tag ----------------------------------------------------------------------------
@@ -457,6 +464,9 @@ def _contact_forces_mixed(tag, pairs, npair, nown, u, w, closed, dprev, par, ipa
     ``BEYOND_TABLE`` is in those units)."""
     gap, damping = par[P_GAP], par[P_DAMPING]
     table = ipar[I_TABLE]
+    # the classes' arrays taken out of the record once: taken in the loop, for a call, they
+    # cost 27 ns per contact (42 ns per contact in all, against 15 ns)
+    cpar, coef = mix.cpar, mix.coef
     nev = 0
     rate2 = 0.0
     for k in range(npair):
@@ -484,15 +494,18 @@ def _contact_forces_mixed(tag, pairs, npair, nown, u, w, closed, dprev, par, ipa
                 closed[l] = 0 if opening else 1
             if own:
                 dprev[l] = delta
-        own_delta = delta * mix.inv_len[jt]
-        if table and own_delta > mix.cpar[mix.cls[jt], P_DELTA_MAX]:
+        c = mix.cls[jt]
+        own_delta = delta * mix.inv_len[jt]  # F = A f(delta / L), f the class's law
+        if table and own_delta > cpar[c, P_DELTA_MAX]:
             return nev, rate2, BEYOND_TABLE, l, own_delta
         F = 0.0
         if closed[l] != 0:
             if not math.isfinite(delta):
                 F = math.nan
+            elif table:
+                F = mix.scale[jt] * class_spline_force(coef, cpar, c, own_delta)
             else:
-                F = mixed_force(mix, ipar, jt, delta)
+                F = mix.scale[jt] * class_exact_force(cpar, ipar, c, own_delta)
             if damping != 0.0:
                 F = F + damping * rate
                 if own and new_step:

@@ -451,7 +451,7 @@ void FixMdgranChain::read_mixture(const char *file)
 
 // Force of the closed unlike contact whose left atom has tag jt, at compression d:
 // F = A f(d / L) with f its class's law (located_law: as located_force, else law_force)
-double FixMdgranChain::mixed_force(tagint jt, double d, int located_law) const
+inline double FixMdgranChain::mixed_force(tagint jt, double d, int located_law) const
 {
   const MdgranLaw &law = laws[m_cls[jt]];
   double u = d * m_inv_len[jt];
@@ -1047,7 +1047,8 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
 
 // located_pass of a closed unlike contact c at compression d: its force F = A f(d / L) and
 // kick force Fv (the mean force near its snap-off, in its own units), its threshold returned
-double FixMdgranChain::mixed_located(const Con &c, double d, double h, double &F, double &Fv)
+inline double FixMdgranChain::mixed_located(const Con &c, double d, double h, double &F,
+                                            double &Fv)
 {
   const tagint jt = atom->tag[c.l];
   const MdgranLaw &law = laws[m_cls[jt]];
