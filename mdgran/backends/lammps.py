@@ -183,6 +183,7 @@ class LammpsBackend(Backend):
             except native_plugin.PluginUnavailable as exc:
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
         super().__init__(scene, **options)
+        self._check_law_tables(contact_eval)
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
@@ -208,6 +209,19 @@ class LammpsBackend(Backend):
                       "wall_time_s": 0.0, "callback_s": 0.0}
         if self.table is not None:
             self.stats["table"] = self.table.error()
+
+    def _check_law_tables(self, contact_eval):
+        """Unlike beads with one law per pair (random diameters with ``contact.lambda``) would
+        need a force table per contact (128 KB each, in the hook and in the plugin's files):
+        more than the fast backend's limit is refused, before anything runs."""
+        from .fast import MAX_LAW_TABLES
+
+        mix = self.model.mixture
+        if mix is not None and contact_eval == "table" and len(mix.laws) > MAX_LAW_TABLES:
+            raise SceneError("beads", f"{len(mix.laws)} distinct pair laws (each pair's lambda "
+                             "follows its size): the LAMMPS backend tabulates at most "
+                             f"{MAX_LAW_TABLES}; run it with the exact law "
+                             "('lammps:contact_eval=exact'), or give contact.fc (one law)")
 
     # ---- set-up ------------------------------------------------------------------------
     def _start(self):
