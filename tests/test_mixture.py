@@ -109,23 +109,6 @@ def test_patterns_lay_out_the_diameters():
     assert r == pytest.approx(d**3)
 
 
-@pytest.mark.parametrize("sets, key", [
-    (["beads.pattern=dimer", "beads.ratio=0.8", "chain.n=21"], "beads"),
-    (["thermal.temperature=0.1"], "thermal.temperature"),
-    (["substrate.damping=0.1"], "substrate.damping"),
-])
-def test_lammps_refuses_what_it_does_not_run(sets, key, tmp_path):
-    """LAMMPS refuses unlike beads, thermal velocities and substrate damping before running:
-    exit 2, one line naming the key."""
-    args = [a for s in sets for a in ("--set", s)]
-    proc = subprocess.run([sys.executable, "-m", "mdgran", "run", "micro-star", "--backend",
-                           "lammps", "--out", str(tmp_path / "x.h5"), *args],
-                          capture_output=True, text=True)
-    assert proc.returncode == 2
-    assert proc.stderr.count("\n") == 1 and key in proc.stderr
-    assert not (tmp_path / "x.h5").exists()
-
-
 # ---- against analytic results --------------------------------------------------------------
 UNLIKE_PAIR = dict(s=[1.0, 0.6], rho=[1.0, 2.0], k=[1.0, 0.5], a=[1.0, 1.5], v0=3.0)
 

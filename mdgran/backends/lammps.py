@@ -48,6 +48,14 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
+* **Unlike beads, strikers, substrate damping, thermal velocities** (issue 17): the hook's
+  :class:`~mdgran.backends.lammps_hook.HookMix` and the fix's ``mixture FILE`` and
+  ``sub_damping C`` give each contact its pair's law ``A f(delta / L)`` and each bead its mass
+  and substrate factor; LAMMPS's integrator gets the masses as per-atom masses (``fix
+  property/atom rmass``); every rank sets its atoms' initial displacements (the equilibrium of
+  unlike beads between walls) and velocities (thermal plus impulse) from
+  :meth:`ChainModel.initial_state` (:meth:`LammpsBackend._initial_state`).  The homogeneous
+  chain takes none of these branches.
 * **Located events** (``events="located"``, the default with the native contact): the fix
   integrates the chain itself (``fix move`` and ``fix substrate`` go) and splits each step at
   its earliest contact event over all ranks, as the fast backend does: second order in dt
@@ -69,7 +77,7 @@ from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
-from .base import CLOSE, OPEN, Backend, Event, Frame, IntegrationError
+from .base import ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError
 
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
@@ -156,6 +164,8 @@ class LammpsBackend(Backend):
     #: dt = 0.0025), micro-star 0.42 (dt = 0.0025) and 0.17 (0.01), the other hard cases
     #: 0.01-0.51 at dt = 0.01: 4x margin (3x at dt = 0.01, where the cap binds)
     ledger_c = {1: 4.0, 2: LEDGER_C_LOCATED}
+    #: unlike beads, strikers, thermal velocities, substrate damping: hook and native contact
+    supports = ALL_FEATURES
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
                  table_file=None, extra_commands=(), contact="hook", events=None, **options):
@@ -173,6 +183,7 @@ class LammpsBackend(Backend):
             except native_plugin.PluginUnavailable as exc:
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
         super().__init__(scene, **options)
+        self._check_law_tables(contact_eval)
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
@@ -198,6 +209,19 @@ class LammpsBackend(Backend):
                       "wall_time_s": 0.0, "callback_s": 0.0}
         if self.table is not None:
             self.stats["table"] = self.table.error()
+
+    def _check_law_tables(self, contact_eval):
+        """Unlike beads with one law per pair (random diameters with ``contact.lambda``) would
+        need a force table per contact (128 KB each, in the hook and in the plugin's files):
+        more than the fast backend's limit is refused, before anything runs."""
+        from .fast import MAX_LAW_TABLES
+
+        mix = self.model.mixture
+        if mix is not None and contact_eval == "table" and len(mix.laws) > MAX_LAW_TABLES:
+            raise SceneError("beads", f"{len(mix.laws)} distinct pair laws (each pair's lambda "
+                             "follows its size): the LAMMPS backend tabulates at most "
+                             f"{MAX_LAW_TABLES}; run it with the exact law "
+                             "('lammps:contact_eval=exact'), or give contact.fc (one law)")
 
     # ---- set-up ------------------------------------------------------------------------
     def _start(self):
@@ -248,6 +272,8 @@ class LammpsBackend(Backend):
         above the largest compression the contact table allows plus the initial gap, so that
         neighbours never pass each other (``delta_max = 100``: 128)."""
         delta_max = self.table.delta_max if self.table is not None else 100.0
+        if self.model.mixed:  # each table reaches delta_max in its contact's own units
+            delta_max = delta_max * float(np.max(self.model.mixture.length_scale))
         return 2.0 ** math.ceil(math.log2(delta_max + max(float(self.model.gap), 0.0) + 1.0))
 
     def _start_native(self, lmp):
@@ -266,11 +292,18 @@ class LammpsBackend(Backend):
                 f"k1 {float(m.k1)!r}", f"k3 {float(m.k3)!r}", f"gap {float(m.gap)!r}",
                 f"walls {'yes' if self.walls else 'no'}",
                 f"closed {'yes' if m.gap <= 0 else 'no'}"]
-        if self.table is not None:  # every rank writes its own copy (no shared file system)
-            self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+        # every rank writes its own copies (no shared file system)
+        self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+        if self.table is not None:
             path = Path(self._tmpdir.name) / "contact.spline"
             native_plugin.write_spline(self.table, path)
             args.append(f"table {path}")
+        if m.mixed:
+            points = self.table.n if self.table is not None else None
+            path = native_plugin.write_mixture(m, Path(self._tmpdir.name), points)
+            args.append(f"mixture {path}")
+        if m.substrate_damping:
+            args.append(f"sub_damping {float(m.substrate_damping)!r}")
         from .lammps_hook import tether_stiffness
 
         setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
@@ -288,6 +321,7 @@ class LammpsBackend(Backend):
                     "fix_modify contact energy yes"):
             lmp.command(cmd)
         self._events_read = 0
+        self._initial_state(lmp)  # thermal velocities (the fix reads v at its set-up)
         if self.table_file is not None and self.table is not None and self.rank == 0:
             self.table.write_lammps(self.table_file)
 
@@ -329,6 +363,11 @@ class LammpsBackend(Backend):
         self._kernel = lammps_hook
         self._par, self._ipar = lammps_hook.parameters(self.model, self.law, self.table, self.dt,
                                                        tether)
+        points = self.table.n if self.table is not None else None
+        self._mix = lammps_hook.mix_parameters(self.model, self._ipar, self.dt, points, tether)
+        self._extended = bool(self._ipar[lammps_hook.I_MIXED] or
+                              self._ipar[lammps_hook.I_SUB_DAMPED])
+        self._initial_state(lmp)
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0
@@ -352,6 +391,34 @@ class LammpsBackend(Backend):
         # every call: 190 us per call under a load of 3; now 28 us under a load of 1)
         self._cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(self._callback)
         lmp.lib.lammps_set_fix_external_callback(lmp.lmp, b"contact", self._cfunc, None)
+
+    def _initial_state(self, lmp):
+        """Beyond the paper's start (unlike beads, initial random velocities): every owned
+        atom's mass (``fix property/atom rmass``: per-atom masses, which ``fix nve`` then
+        uses), displacement and velocity, by tag, from :meth:`ChainModel.initial_state` (the
+        static equilibrium of unlike beads between walls, the thermal velocities plus the
+        impulse): the same start as the reference and fast backends.  Called after ``d_x0``
+        holds the atoms' places on the line; the homogeneous chain is left as chain.in made it."""
+        m = self.model
+        if not (m.mixed or m.temperature):
+            return
+        d = self.scene.data
+        x_start, v_start, _ = m.initial_state(int(d["impulse"]["bead"]),
+                                              float(d["impulse"]["velocity"]))
+        first = 2 if self.walls else 1  # tag of bead 0
+        n = lmp.extract_setting("nlocal")
+        ex = lmp.numpy.extract_atom
+        bead = ex("id", nelem=n).astype(np.int64) - first
+        mobile = (bead >= 0) & (bead < m.n)
+        if m.mixed and not m.mixture.uniform_mass:
+            lmp.command("fix masses all property/atom rmass")
+            n = lmp.extract_setting("nlocal")
+            rmass = ex("rmass", nelem=n)
+            rmass[:] = 1.0
+            rmass[mobile] = m.mixture.mass[bead[mobile]]
+        x, v = ex("x", nelem=n, dim=3), ex("v", nelem=n, dim=3)
+        x[mobile, 0] += x_start[bead[mobile]]
+        v[mobile, 0] = v_start[bead[mobile]]
 
     def _buffers(self, nmax):
         """Scratch of the kernel, sized to LAMMPS's per-atom arrays (``nmax``)."""
@@ -399,10 +466,18 @@ class LammpsBackend(Backend):
                 if missing >= 0:
                     raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
                                              step)
-                nev, power, err, where, value = kernel.contact_step(
-                    tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap, self._coef,
-                    self._par, self._ipar, step, new_step, self._last_step is not None, self._u,
-                    self._w, self._fcon, self._left, self._pairs, npair, nown, self._ev)
+                if self._extended:  # unlike beads or substrate damping
+                    nev, power, err, where, value = kernel.contact_step_mixed(
+                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
+                        self._coef, self._par, self._ipar, step, new_step,
+                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
+                        self._pairs, npair, nown, self._ev, self._mix)
+                else:
+                    nev, power, err, where, value = kernel.contact_step(
+                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
+                        self._coef, self._par, self._ipar, step, new_step,
+                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
+                        self._pairs, npair, nown, self._ev)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:
@@ -413,7 +488,8 @@ class LammpsBackend(Backend):
             f[:, :] = 0.0
         if step % self._thermo_every == 0:  # contact energy for thermo (pe, f_contact)
             e = 0.0 if self._error is not None else kernel.contact_energy(
-                tag, nlocal, nall, self._tmap, closed, self._u, self._par, self._ipar)
+                tag, nlocal, nall, self._tmap, closed, self._u, self._par, self._ipar,
+                self._mix)
             if self._mpi is not None:
                 e = self._mpi.allreduce(e)
             self.lmp.fix_external_set_energy_global("contact", e)

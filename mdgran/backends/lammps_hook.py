@@ -38,6 +38,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from typing import NamedTuple
+
 from numba import njit
 
 NEWTON_STEPS = 7  # as mdgran/contact.py
@@ -47,8 +49,8 @@ P_GAP, P_DAMPING, P_K1, P_K3, P_DT, P_DELTA_OFF = 0, 1, 2, 3, 4, 5
 P_FC, P_SIGMA, P_TM, P_BIG, P_SQRT_BIG, P_DELTA_MIN, P_P0 = 6, 7, 8, 9, 10, 11, 12
 P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX, P_K1_TETHER = 13, 14, 15, 16, 17, 18
 NPAR = 19
-I_WALLS, I_NTAGS, I_STRICT, I_HERTZ, I_TABLE = 0, 1, 2, 3, 4
-NIPAR = 5
+I_WALLS, I_NTAGS, I_STRICT, I_HERTZ, I_TABLE, I_MIXED, I_SUB_DAMPED = 0, 1, 2, 3, 4, 5, 6
+NIPAR = 7
 
 # error codes of contact_step (returned with the local index or tag they concern)
 OK, NON_FINITE, BEYOND_TABLE, PARTNER_MISSING = 0, 1, 2, 3
@@ -99,6 +101,75 @@ def parameters(model, law, table, dt, tether=False):
     return par, ipar
 
 
+class HookMix(NamedTuple):
+    """A chain of unlike beads, or a damped substrate, in the hook (:func:`mix_parameters`; the
+    homogeneous chain's :func:`no_mix` is never read).  Arrays by atom tag (``ntags + 1``
+    entries, entry 0 unused; wall atoms have mass 1 and factor 0, never read): bead mass
+    ``1 / inv_mass``, substrate factor ``on_site`` (``g``: 1 on the substrate, 0 free) and, for
+    the contact whose left atom has the tag, the scales of
+    :class:`~mdgran.mixture.Mixture` (``F = scale f(delta / L)``, ``V = scale L V(delta /
+    L)``), its opening threshold ``delta_off = L delta_off(fc_k)`` (units p) and its law class
+    ``cls``.  Each class has its own row of :func:`parameters` (``cpar``: constants of its law
+    and its table) and its table's coefficients (``coef``, every class with the same number of
+    nodes).  ``sub_damping``: the substrate damping ``c_s`` (force ``-g c_s v``)."""
+
+    inv_mass: np.ndarray
+    on_site: np.ndarray
+    scale: np.ndarray
+    inv_len: np.ndarray
+    length: np.ndarray
+    delta_off: np.ndarray
+    cls: np.ndarray  # int64
+    cpar: np.ndarray  # [classes, NPAR]
+    coef: np.ndarray  # [classes, nodes - 1, 4]
+    sub_damping: float
+
+
+def no_mix() -> HookMix:
+    """The :class:`HookMix` of the homogeneous chain (empty arrays, never read)."""
+    e = np.zeros(1)
+    return HookMix(e, e, e, e, e, e, np.zeros(1, dtype=np.int64), np.zeros((1, NPAR)),
+                   np.zeros((1, 1, 4)), 0.0)
+
+
+def mix_parameters(model, ipar, dt, table_points=None, tether=False) -> HookMix:
+    """The :class:`HookMix` of a chain model with unlike beads (``model.mixture``) or substrate
+    damping, and the flags ``I_MIXED``, ``I_SUB_DAMPED`` set in ``ipar``; ``table_points``:
+    nodes of each class's force table (:class:`~mdgran.contact.ContactTable` to ``delta_max =
+    100`` in the class's own units), ``None`` for the exact law.  A substrate-damped
+    homogeneous chain keeps the homogeneous contacts (only ``sub_damping`` is read)."""
+    from ..contact import ContactTable
+
+    mix = model.mixture
+    ipar[I_MIXED] = int(mix is not None)
+    ipar[I_SUB_DAMPED] = int(float(model.substrate_damping) != 0.0)
+    if mix is None:
+        return no_mix()._replace(sub_damping=float(model.substrate_damping))
+    walls = bool(model.walls)
+    ntags = model.n + 2 if walls else model.n
+    first_bead = 2 if walls else 1  # tag of bead 0
+
+    def by_bead(values, wall):
+        out = np.full(ntags + 1, float(wall))
+        out[first_bead:first_bead + model.n] = values
+        return out
+
+    def by_contact(values, dtype=float):
+        out = np.zeros(ntags + 1, dtype=dtype)
+        out[1:1 + len(values)] = values  # contact j (0-based) has left tag j + 1
+        return out
+
+    tables = [ContactTable(law, table_points) if table_points else None for law in mix.laws]
+    rows = [parameters(model, law, tab, dt, tether)[0] for law, tab in zip(mix.laws, tables)]
+    coef = (np.stack([t.f_coef for t in tables]) if table_points
+            else np.zeros((len(rows), 1, 4)))
+    return HookMix(by_bead(1.0 / mix.mass, 1.0), by_bead(mix.substrate, 0.0),
+                   by_contact(mix.force_scale), by_contact(1.0 / mix.length_scale),
+                   by_contact(mix.length_scale), by_contact(mix.delta_off),
+                   by_contact(mix.law_index, np.int64), np.ascontiguousarray(rows),
+                   np.ascontiguousarray(coef), float(model.substrate_damping))
+
+
 # ---- the law ---------------------------------------------------------------------------------
 
 @njit(cache=True)
@@ -147,6 +218,32 @@ def law_energy(par, ipar, d):
     p = (0.4 * math.pow(t, 10.0) - 4.0 * sg * math.pow(t, 7.0)
          + (fc + 15.0 * sg * sg) * math.pow(t, 4.0) - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
     return p - par[P_P0]
+
+
+@njit(cache=True)
+def mixed_energy(mix, ipar, jt, d):
+    """Energy of the unlike contact whose left atom has tag ``jt`` at compression ``d``:
+    ``A L V(d / L)`` (units eta0 p0; :class:`HookMix`), the exact law of its class."""
+    c = mix.cls[jt]
+    return mix.scale[jt] * mix.length[jt] * law_energy(mix.cpar[c], ipar, d * mix.inv_len[jt])
+
+
+@njit(inline="always")
+def class_spline_force(coef, cpar, c, d):
+    """:func:`spline_force` of law class ``c`` (``coef[c]``, ``cpar[c]``), indexing the
+    class's rows in place (no view of them per contact)."""
+    w = math.sqrt(max(d - cpar[c, P_BASE], 0.0))
+    s = min(w * cpar[c, P_SCALE], cpar[c, P_TOP])
+    i = int(s)
+    x = (s - i) * cpar[c, P_H]
+    return ((coef[c, i, 0] * x + coef[c, i, 1]) * x + coef[c, i, 2]) * x + coef[c, i, 3]
+
+
+@njit(cache=True)
+def class_exact_force(cpar, ipar, c, u):
+    """:func:`exact_force` of law class ``c`` at own-units compression ``u`` (the view of the
+    class's row made here, out of the contact loop)."""
+    return exact_force(cpar[c], ipar, u)
 
 
 # ---- atoms by tag ----------------------------------------------------------------------------
@@ -218,6 +315,24 @@ def _record(l, opening, delta, step, have_last, par, ipar, dprev, events, nev):
     events[nev, 1] = 0.0 if opening else 1.0
     events[nev, 2] = te
     events[nev, 3] = law_energy(par, ipar, delta) if opening else 0.0
+    return nev + 1
+
+
+@njit(cache=True)
+def _record_mixed(l, opening, delta, step, have_last, par, ipar, dprev, events, nev, mix, jt):
+    """:func:`_record` of the unlike contact with left tag ``jt``: its own threshold and lost
+    energy ``A L V(delta / L)`` (:class:`HookMix`)."""
+    dt = par[P_DT]
+    t = step * dt
+    prev = dprev[l] if have_last else delta
+    thr = mix.delta_off[jt] if opening else 0.0
+    span = prev - delta
+    frac = (prev - thr) / span if span != 0.0 else 1.0
+    te = t - dt + min(max(frac, 0.0), 1.0) * dt if step > 0 else t
+    events[nev, 0] = l
+    events[nev, 1] = 0.0 if opening else 1.0
+    events[nev, 2] = te
+    events[nev, 3] = mixed_energy(mix, ipar, jt, delta) if opening else 0.0
     return nev + 1
 
 
@@ -341,6 +456,102 @@ def _contact_forces(pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, st
 
 
 @njit(inline="always")
+def _contact_forces_mixed(tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step,
+                          new_step, have_last, fcon, events, mix):
+    """:func:`_contact_forces` of unlike beads (``I_MIXED``): each contact (left tag ``jt``)
+    with its own threshold (strict inequalities where it is 0) and law ``A f(delta / L)``
+    (:class:`HookMix`), its table's range checked in its own units (the value returned with
+    ``BEYOND_TABLE`` is in those units)."""
+    gap, damping = par[P_GAP], par[P_DAMPING]
+    table = ipar[I_TABLE]
+    # the classes' arrays taken out of the record once: taken in the loop, for a call, they
+    # cost 27 ns per contact (42 ns per contact in all, against 15 ns)
+    cpar, coef = mix.cpar, mix.coef
+    nev = 0
+    rate2 = 0.0
+    for k in range(npair):
+        l = pairs[k, 0]
+        r = pairs[k, 1]
+        own = k < nown
+        delta = u[l] - u[r]
+        if gap != 0.0:
+            delta = delta - gap
+        rate = w[l] - w[r]
+        jt = tag[l]
+        delta_off = mix.delta_off[jt]
+        if new_step:
+            c = closed[l] != 0
+            if delta_off == 0.0:
+                opening = c and delta < 0.0
+                closing = (not c) and delta > 0.0
+            else:
+                opening = c and delta <= delta_off
+                closing = (not c) and delta >= 0.0
+            if opening or closing:
+                if own:
+                    nev = _record_mixed(l, opening, delta, step, have_last, par, ipar, dprev,
+                                        events, nev, mix, jt)
+                closed[l] = 0 if opening else 1
+            if own:
+                dprev[l] = delta
+        c = mix.cls[jt]
+        own_delta = delta * mix.inv_len[jt]  # F = A f(delta / L), f the class's law
+        if table and own_delta > cpar[c, P_DELTA_MAX]:
+            return nev, rate2, BEYOND_TABLE, l, own_delta
+        F = 0.0
+        if closed[l] != 0:
+            if not math.isfinite(delta):
+                F = math.nan
+            elif table:
+                F = mix.scale[jt] * class_spline_force(coef, cpar, c, own_delta)
+            else:
+                F = mix.scale[jt] * class_exact_force(cpar, ipar, c, own_delta)
+            if damping != 0.0:
+                F = F + damping * rate
+                if own and new_step:
+                    rate2 += rate * rate
+        fcon[l] = F
+    return nev, rate2, OK, -1, 0.0
+
+
+@njit(inline="always")
+def _bead_forces_mixed(tag, nlocal, left, fcon, u, w, par, ipar, new_step, fext, aprev, mix):
+    """:func:`_bead_forces` of unlike beads or a damped substrate: the force on owned atom
+    ``i`` (bead of mass ``m``, substrate factor ``g``, :class:`HookMix`)
+    ``F_left - F_right - g (k3 u^3 + c_s w + k u)`` into ``fext``, with ``w`` the velocity
+    estimate of the contact damping, and at a new step ``aprev = (F - g k1 u) / m`` (the
+    same force with ``k1`` in place of the tether's ``k``, over the mass).  Returns ``(error
+    code, local index, value, substrate damping power g c_s w^2 of the owned beads)``."""
+    walls, ntags, mixed = ipar[I_WALLS], ipar[I_NTAGS], ipar[I_MIXED] != 0
+    k1, k3, k_tether = par[P_K1], par[P_K3], par[P_K1_TETHER]
+    cs = mix.sub_damping
+    power = 0.0
+    for i in range(nlocal):
+        ext = 0.0
+        t = tag[i]
+        g = 0.0
+        if not (walls and (t == 1 or t == ntags)):
+            g = mix.on_site[t] if mixed else 1.0
+            fl = fcon[left[i]] if left[i] >= 0 else 0.0
+            ext = (0.0 - fcon[i]) + fl
+            if k3 != 0.0:
+                ext = ext - g * (k3 * math.pow(u[i], 3.0))
+            if cs != 0.0:
+                ext = ext - g * (cs * w[i])
+                if new_step:
+                    power += g * (cs * w[i] * w[i])
+        if not math.isfinite(ext):
+            return NON_FINITE, i, ext, power
+        fext[i, 0] = ext - g * (k_tether * u[i]) if k_tether != 0.0 else ext
+        fext[i, 1] = 0.0
+        fext[i, 2] = 0.0
+        if new_step:
+            a = ext - g * (k1 * u[i]) if k1 != 0.0 else ext
+            aprev[i] = a * mix.inv_mass[t] if mixed else a
+    return OK, -1, 0.0, power
+
+
+@njit(inline="always")
 def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
     """Forces on owned atoms, ``x'' = F_left - F_right - k3 u^3 - k u`` (``k`` the tether's
     stiffness) into ``fext`` (y, z zeroed), and at a new step ``aprev`` (``- k1 u``, as
@@ -415,9 +626,41 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
 
 
 @njit(cache=True)
-def contact_energy(tag, nlocal, nall, tmap, closed, u, par, ipar):
+def contact_step_mixed(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef,
+                       par, ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown,
+                       events, mix):
+    """:func:`contact_step` of unlike beads or a damped substrate (flags ``I_MIXED``,
+    ``I_SUB_DAMPED``; ``mix`` their :class:`HookMix`): each contact its own law
+    (:func:`_contact_forces_mixed`, or the chain's where only the substrate is damped), each
+    bead its mass, substrate factor and substrate damping (:func:`_bead_forces_mixed`), whose
+    power is added to the returned one.  A function of its own, so that the homogeneous
+    chain's :func:`contact_step` is compiled as before."""
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
+    if ipar[I_MIXED] != 0:
+        nev, rate2, code, where, value = _contact_forces_mixed(
+            tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step, new_step, have_last,
+            fcon, events, mix)
+    else:
+        nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed,
+                                                         dprev, coef, par, ipar, step,
+                                                         new_step, have_last, fcon, events)
+    if code != OK:
+        return nev, rate2, code, where, value
+    code, where, value, sub_power = _bead_forces_mixed(tag, nlocal, left, fcon, u, w, par,
+                                                       ipar, new_step, fext, aprev, mix)
+    damping = par[P_DAMPING]
+    power = damping * rate2 if damping != 0.0 else 0.0
+    if ipar[I_SUB_DAMPED] != 0:
+        power = power + sub_power
+    if code != OK:
+        return nev, rate2, code, where, value
+    return nev, power, OK, -1, 0.0
+
+
+@njit(cache=True)
+def contact_energy(tag, nlocal, nall, tmap, closed, u, par, ipar, mix):
     """Energy ``sum V(delta)`` of the closed contacts whose left atom is owned (``u`` as left
-    by :func:`contact_step`), the exact law."""
+    by :func:`contact_step`), the exact law (unlike beads: each contact's own)."""
     e = 0.0
     for i in range(nlocal):
         if closed[i] == 0 or tag[i] >= ipar[I_NTAGS]:
@@ -428,5 +671,8 @@ def contact_energy(tag, nlocal, nall, tmap, closed, u, par, ipar):
         delta = u[i] - u[j]
         if par[P_GAP] != 0.0:
             delta = delta - par[P_GAP]
-        e += law_energy(par, ipar, delta)
+        if ipar[I_MIXED] != 0:
+            e += mixed_energy(mix, ipar, tag[i], delta)
+        else:
+            e += law_energy(par, ipar, delta)
     return e

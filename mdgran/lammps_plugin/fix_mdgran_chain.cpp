@@ -22,6 +22,14 @@
 //     integrate yes|no (quantized: the fix also moves the atoms of its group that are not walls
 //            along x with fix nve's velocity Verlet, the same operations, in place of fix nve;
 //            default no)
+//     mixture FILE (unlike beads, mdgran.native_plugin.write_mixture: by atom tag the bead's
+//            1/m and substrate factor g, and for the contact to its right its scales A, 1/L,
+//            L, threshold L delta_off and law class, each class with its fc and table: the
+//            contact's force A f(delta / L), energy A L V(delta / L); a bead's acceleration
+//            (F_left - F_right - g (k1 u + k3 u^3 + c_s w)) / m.  Quantized, LAMMPS's
+//            integrator needs the same masses as per-atom masses (rmass); default: none)
+//     sub_damping C (substrate damping: force -g C w on each bead, w the velocity estimate of
+//            the contact damping; its power is added to D_viscous; default 0)
 //
 // Contacts by tag: contact k joins the atoms with tags k and k+1 (found with atom->map, so
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
@@ -115,6 +123,9 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   integrate = 0;
   use_table = 0;
   located = 0;
+  mixed = extended = 0;
+  sub_damping = 0.0;
+  std::string mixture_file;
   for (int iarg = 3; iarg < narg; iarg += 2) {
     if (iarg + 1 >= narg)
       error->all(FLERR, "fix mdgran/chain: keyword {} needs a value", arg[iarg]);
@@ -138,6 +149,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     else if (key == "walls") walls = utils::logical(FLERR, val, false, lmp);
     else if (key == "closed") init_closed = utils::logical(FLERR, val, false, lmp);
     else if (key == "table") { use_table = 1; table_file = val; }
+    else if (key == "mixture") mixture_file = val;
+    else if (key == "sub_damping") sub_damping = utils::numeric(FLERR, val, false, lmp);
     else if (key == "events") {
       if (val == "located") located = 1;
       else if (val != "quantized")
@@ -156,22 +169,11 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   if (!hertz && !(fc >= -2.0 && fc <= -1.5))
     error->all(FLERR, "fix mdgran/chain: fc must lie in [-2, -1.5], not {}", fc);
 
-  // constants of the law, evaluated as mdgran/contact.py does (same libm calls)
-  double s = hertz ? 0.0 : (fc + 2.0) / 3.0;
-  sigma = std::sqrt(std::max(s, 0.0));
-  tm = std::pow(sigma, 1.0 / 3.0);
-  big = 6.0 * tm * tm;
-  sqrt_big = std::sqrt(big);
-  delta_min = hertz ? 0.0 : std::pow(tm, 4.0) - 4.0 * sigma * tm;
-  double tf = std::pow(3.0 * sigma, 1.0 / 3.0);
-  double delta_fmax = std::pow(tf, 4.0) - 4.0 * sigma * tf;
-  delta_off = hertz ? 0.0 : (snap_force ? delta_fmax : delta_min);
-  strict = delta_off == 0.0;
-  t0 = std::pow(4.0 * sigma, 1.0 / 3.0);
-  p_t0 = hertz ? 0.0 : antiderivative(t0);    // V's constant, once (3 pow calls per energy)
-  if (use_table) read_table(table_file.c_str());
-  // displacement snap-off of Schwarz: f ~ sqrt(delta - delta_min) near the event
-  sing = (!hertz && !snap_force && tm > 0.0) ? delta_min + SING_BAND : -INFINITY;
+  set(hertz, fc, snap_force);
+  if (use_table) {
+    std::string msg = read_table(table_file.c_str());
+    if (!msg.empty()) error->one(FLERR, msg);
+  }
   if (init_closed < 0) init_closed = gap <= 0.0;
 
   if (atom->map_style == Atom::MAP_NONE)
@@ -200,6 +202,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   time_integrate = located || integrate;
 
   ntags = (tagint) atom->natoms;
+  if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
+  extended = mixed || sub_damping != 0.0;
   grow_arrays(atom->nmax);
   atom->add_callback(Atom::GROW);
   atom->add_callback(Atom::RESTART);
@@ -272,9 +276,30 @@ void FixMdgranChain::init()
 
 // ---- the law ------------------------------------------------------------------------------
 
+// The law's constants, evaluated as mdgran/contact.py does (same libm calls).
+void MdgranLaw::set(int hertz_law, double fc_law, int snap_force)
+{
+  hertz = hertz_law;
+  fc = fc_law;
+  double s = hertz ? 0.0 : (fc + 2.0) / 3.0;
+  sigma = std::sqrt(std::max(s, 0.0));
+  tm = std::pow(sigma, 1.0 / 3.0);
+  big = 6.0 * tm * tm;
+  sqrt_big = std::sqrt(big);
+  delta_min = hertz ? 0.0 : std::pow(tm, 4.0) - 4.0 * sigma * tm;
+  double tf = std::pow(3.0 * sigma, 1.0 / 3.0);
+  double delta_fmax = std::pow(tf, 4.0) - 4.0 * sigma * tf;
+  delta_off = hertz ? 0.0 : (snap_force ? delta_fmax : delta_min);
+  strict = delta_off == 0.0;
+  t0 = std::pow(4.0 * sigma, 1.0 / 3.0);
+  p_t0 = hertz ? 0.0 : antiderivative(t0);    // V's constant, once (3 pow calls per energy)
+  // displacement snap-off of Schwarz: f ~ sqrt(delta - delta_min) near the event
+  sing = (!hertz && !snap_force && tm > 0.0) ? delta_min + SING_BAND : -INFINITY;
+}
+
 // Branch parameter t >= t_min with t^4 - 4 sigma t = delta: Newton on
 // phi(w) = w sqrt(w^2 + 4 tm w + 6 tm^2) = sqrt(delta - delta_min), w = t - tm, from above.
-double FixMdgranChain::t_of_delta(double d) const
+double MdgranLaw::t_of_delta(double d) const
 {
   double t;
   t_of_delta_n(&d, &t, 1);
@@ -284,7 +309,7 @@ double FixMdgranChain::t_of_delta(double d) const
 // t_of_delta of n <= T_BLOCK compressions at once, each with the same operations: the Newton
 // steps of the n values interleave (one value's steps are a chain of dependent square roots
 // and divisions; the contact energy of 1e5 contacts took 17 ms one by one)
-void FixMdgranChain::t_of_delta_n(const double *d, double *t, int n) const
+void MdgranLaw::t_of_delta_n(const double *d, double *t, int n) const
 {
   double rhs[T_BLOCK], w[T_BLOCK];
   for (int j = 0; j < n; j++) rhs[j] = std::sqrt(std::max(d[j] - delta_min, 0.0));
@@ -301,7 +326,7 @@ void FixMdgranChain::t_of_delta_n(const double *d, double *t, int n) const
   for (int j = 0; j < n; j++) t[j] = tm + std::max(w[j], 0.0);
 }
 
-double FixMdgranChain::exact_force(double d) const
+double MdgranLaw::exact_force(double d) const
 {
   if (hertz) {
     double dp = std::max(d, 0.0);
@@ -311,20 +336,20 @@ double FixMdgranChain::exact_force(double d) const
   return fc + u * u;
 }
 
-double FixMdgranChain::law_force(double d) const
+double MdgranLaw::law_force(double d) const
 {
   return use_table ? spline_force(d) : exact_force(d);
 }
 
 // antiderivative of f(t) delta'(t): V(delta) = P(t(delta)) - P(t0)
-double FixMdgranChain::antiderivative(double t) const
+double MdgranLaw::antiderivative(double t) const
 {
   const double sg = sigma;
   return 0.4 * std::pow(t, 10.0) - 4.0 * sg * std::pow(t, 7.0) +
       (fc + 15.0 * sg * sg) * std::pow(t, 4.0) - 4.0 * sg * (fc + 9.0 * sg * sg) * t;
 }
 
-double FixMdgranChain::law_energy(double d) const
+double MdgranLaw::law_energy(double d) const
 {
   if (hertz) {
     double dp = std::max(d, 0.0);
@@ -335,10 +360,10 @@ double FixMdgranChain::law_energy(double d) const
 
 // The spline table of mdgran.contact.ContactTable.write_spline: keyword lines, then the
 // (n - 1) x 4 coefficients of the force, every number with 17 digits (exact round trip).
-void FixMdgranChain::read_table(const char *file)
+std::string MdgranLaw::read_table(const char *file)
 {
   std::ifstream in(file);
-  if (!in) error->one(FLERR, "fix mdgran/chain: cannot open table {}", file);
+  if (!in) return "fix mdgran/chain: cannot open table " + std::string(file);
   std::string line, key;
   tab_n = 0;
   while (std::getline(in, line)) {
@@ -356,13 +381,87 @@ void FixMdgranChain::read_table(const char *file)
     else if (key == "h") tab_h = v;
     else if (key == "delta_max") tab_delta_max = v;
   }
-  if (tab_n < 2) error->one(FLERR, "fix mdgran/chain: table {} has no 'n' line", file);
+  if (tab_n < 2) return "fix mdgran/chain: table " + std::string(file) + " has no 'n' line";
   tab_coef.resize(4 * (size_t) (tab_n - 1));
   std::string tok;
   for (size_t k = 0; k < tab_coef.size(); k++) {
-    if (!(in >> tok)) error->one(FLERR, "fix mdgran/chain: table {} is truncated", file);
+    if (!(in >> tok)) return "fix mdgran/chain: table " + std::string(file) + " is truncated";
     tab_coef[k] = std::strtod(tok.c_str(), nullptr);
   }
+  use_table = 1;
+  return "";
+}
+
+// The unlike beads of "mixture FILE" (written by mdgran/backends/lammps.py): keyword lines
+//   MDGRAN_MIXTURE,  ntags N,  classes C,  class K fc VALUE [table FILE]  (C of them),  tags
+// then N lines "tag 1/m g A 1/L L delta_off class" (numbers with 17 digits: exact round trip).
+// Every class has the chain's kind (hertz or not) and snap-off rule, and its own fc and table.
+void FixMdgranChain::read_mixture(const char *file)
+{
+  std::ifstream in(file);
+  if (!in) error->one(FLERR, "fix mdgran/chain: cannot open mixture {}", file);
+  std::string line, key;
+  long n = -1;
+  int nclass = 0;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    ls >> key;
+    if (key == "tags") break;
+    if (key == "ntags") ls >> n;
+    else if (key == "classes") {
+      ls >> nclass;
+      laws.resize(std::max(nclass, 0));
+    } else if (key == "class") {
+      int k = -1;
+      std::string fckey, fcval, tkey, tfile;
+      ls >> k >> fckey >> fcval;
+      if (k < 0 || k >= nclass || fckey != "fc")
+        error->one(FLERR, "fix mdgran/chain: mixture {}: bad line '{}'", file, line);
+      laws[k].set(hertz, std::strtod(fcval.c_str(), nullptr), snap_force);
+      if (ls >> tkey >> tfile) {
+        std::string msg = laws[k].read_table(tfile.c_str());
+        if (!msg.empty()) error->one(FLERR, msg);
+      }
+    }
+  }
+  if (n != (long) ntags)
+    error->one(FLERR, "fix mdgran/chain: mixture {} is for {} atoms, not {}", file, n, ntags);
+  for (auto *v : {&m_inv_mass, &m_on_site, &m_scale, &m_inv_len, &m_length, &m_delta_off})
+    v->assign(n + 1, 0.0);
+  m_cls.assign(n + 1, 0);
+  std::string tok[8];
+  for (long k = 0; k < n; k++) {
+    for (auto &t : tok)
+      if (!(in >> t)) error->one(FLERR, "fix mdgran/chain: mixture {} is truncated", file);
+    long t = std::strtol(tok[0].c_str(), nullptr, 10);
+    int cls = (int) std::strtol(tok[7].c_str(), nullptr, 10);
+    if (t < 1 || t > n || cls < 0 || cls >= nclass)
+      error->one(FLERR, "fix mdgran/chain: mixture {}: bad row of tag {}", file, tok[0]);
+    m_inv_mass[t] = std::strtod(tok[1].c_str(), nullptr);
+    m_on_site[t] = std::strtod(tok[2].c_str(), nullptr);
+    m_scale[t] = std::strtod(tok[3].c_str(), nullptr);
+    m_inv_len[t] = std::strtod(tok[4].c_str(), nullptr);
+    m_length[t] = std::strtod(tok[5].c_str(), nullptr);
+    m_delta_off[t] = std::strtod(tok[6].c_str(), nullptr);
+    m_cls[t] = cls;
+  }
+  mixed = 1;
+}
+
+// Force of the closed unlike contact whose left atom has tag jt, at compression d:
+// F = A f(d / L) with f its class's law (located_law: as located_force, else law_force)
+inline double FixMdgranChain::mixed_force(tagint jt, double d, int located_law) const
+{
+  const MdgranLaw &law = laws[m_cls[jt]];
+  double u = d * m_inv_len[jt];
+  return m_scale[jt] * (located_law ? law.located_force(u) : law.law_force(u));
+}
+
+// Energy of that contact, A L V(d / L) (exact law)
+double FixMdgranChain::mixed_energy(tagint jt, double d) const
+{
+  return m_scale[jt] * m_length[jt] * laws[m_cls[jt]].law_energy(d * m_inv_len[jt]);
 }
 
 // ---- the step -----------------------------------------------------------------------------
@@ -401,7 +500,15 @@ void FixMdgranChain::post_force(int /*vflag*/)
   else compute(update->ntimestep);
 }
 
+// The step of events quantized: the chain's one law (MIX false, the code every homogeneous
+// run takes), or each contact's own (MIX: unlike beads), chosen once per call.
 void FixMdgranChain::compute(bigint step)
+{
+  if (mixed) compute_t<true>(step);
+  else compute_t<false>(step);
+}
+
+template <bool MIX> void FixMdgranChain::compute_t(bigint step)
 {
   const int new_step = !have_last || step != last_step;
   ncompute++;
@@ -442,12 +549,14 @@ void FixMdgranChain::compute(bigint step)
   // a switch of contact l at this step (rare): its event time and lost energy, on the owner
   auto record = [&](int l, double delta, int opening) __attribute__((noinline)) {
     double prev = have_last ? dprev[l] : delta;
-    double thr = opening ? delta_off : 0.0;
+    double thr = opening ? (MIX ? m_delta_off[tag[l]] : delta_off) : 0.0;
     double span = prev - delta;
     double frac = span != 0.0 ? (prev - thr) / span : 1.0;
     double te = step > 0 ? t - dt + std::min(std::max(frac, 0.0), 1.0) * dt : t;
     found.push_back({step, tag[l], opening ? 0 : 1, te});
-    lost.push_back(opening ? law_energy(delta) : 0.0);
+    double e = 0.0;
+    if (opening) e = MIX ? mixed_energy(tag[l], delta) : law_energy(delta);
+    lost.push_back(e);
   };
   auto overflow = [&](int l, double delta) __attribute__((noinline)) {
     error->one(FLERR,
@@ -459,20 +568,31 @@ void FixMdgranChain::compute(bigint step)
     double delta = u_[l] - u_[r];
     if (gap_ != 0.0) delta = delta - gap_;
     double rate = w_[l] - w_[r];
+    double off = delta_off_;
+    int strict_ = strict;
+    if constexpr (MIX) {    // unlike beads: the contact's own threshold and table range
+      const tagint jt = tag[l];
+      off = m_delta_off[jt];
+      strict_ = off == 0.0;
+      const MdgranLaw &law = laws[m_cls[jt]];
+      if (law.use_table && delta * m_inv_len[jt] > law.tab_delta_max)
+        overflow(l, delta * m_inv_len[jt]);
+    }
     if (new_step) {
       int c = closed_[l] != 0.0;
-      int opening = c && (strict ? delta < 0.0 : delta <= delta_off_);
-      int closing = !c && (strict ? delta > 0.0 : delta >= 0.0);
+      int opening = c && (strict_ ? delta < 0.0 : delta <= off);
+      int closing = !c && (strict_ ? delta > 0.0 : delta >= 0.0);
       if (opening || closing) {
         if (own) record(l, delta, opening);
         closed_[l] = opening ? 0.0 : 1.0;
       }
       if (own) dprev_[l] = delta;
     }
-    if (use_table && delta > tab_delta_max) overflow(l, delta);
+    if (!MIX && use_table && delta > tab_delta_max) overflow(l, delta);
     double F = 0.0;
     if (closed_[l] != 0.0) {
-      F = use_table ? spline_force(delta) : exact_force(delta);
+      if constexpr (MIX) F = mixed_force(tag[l], delta, 0);
+      else F = use_table ? spline_force(delta) : exact_force(delta);
       if (damping_ != 0.0) F = F + damping_ * rate;
       if (own && new_step && damping_ != 0.0) power += rate * rate;
     }
@@ -490,19 +610,41 @@ void FixMdgranChain::compute(bigint step)
   const int *const mask = atom->mask, *const left_ = left;
   const double k1_ = k1, k3_ = k3, tether_ = tether;
   const int bit = groupbit;
-  double check = 0.0;
-  for (int i = 0; i < nlocal; i++) {
-    double ext = 0.0;
-    const int wall = is_wall(tag[i]);
-    if (!wall) {
-      double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
-      ext = (0.0 - fcon_[i]) + fl;
-      if (k3_ != 0.0) ext = ext - k3_ * std::pow(u_[i], 3.0);
+  double check = 0.0, sub_power = 0.0;
+  if (!extended)
+    for (int i = 0; i < nlocal; i++) {
+      double ext = 0.0;
+      const int wall = is_wall(tag[i]);
+      if (!wall) {
+        double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
+        ext = (0.0 - fcon_[i]) + fl;
+        if (k3_ != 0.0) ext = ext - k3_ * std::pow(u_[i], 3.0);
+      }
+      check += ext * 0.0;    // 0, unless some ext is not finite (NaN then)
+      if (mask[i] & bit) f[3 * i] += tether_ != 0.0 && !wall ? ext - tether_ * u_[i] : ext;
+      if (new_step) aprev_[i] = k1_ != 0.0 ? ext - k1_ * u_[i] : ext;
     }
-    check += ext * 0.0;    // 0, unless some ext is not finite (NaN then)
-    if (mask[i] & bit) f[3 * i] += tether_ != 0.0 && !wall ? ext - tether_ * u_[i] : ext;
-    if (new_step) aprev_[i] = k1_ != 0.0 ? ext - k1_ * u_[i] : ext;
-  }
+  else    // unlike beads or substrate damping (the hook's _bead_forces_mixed): bead of mass m,
+    // substrate factor g: F_left - F_right - g (k3 u^3 + c_s w + K u); a(t) = (.. k1 ..) / m
+    for (int i = 0; i < nlocal; i++) {
+      double ext = 0.0, g = 0.0;
+      if (!is_wall(tag[i])) {
+        g = mixed ? m_on_site[tag[i]] : 1.0;
+        double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
+        ext = (0.0 - fcon_[i]) + fl;
+        if (k3_ != 0.0) ext = ext - g * (k3_ * std::pow(u_[i], 3.0));
+        if (sub_damping != 0.0) {
+          ext = ext - g * (sub_damping * w_[i]);
+          if (new_step) sub_power += g * (sub_damping * w_[i] * w_[i]);
+        }
+      }
+      check += ext * 0.0;
+      if (mask[i] & bit) f[3 * i] += tether_ != 0.0 ? ext - g * (tether_ * u_[i]) : ext;
+      if (new_step) {
+        double a = k1_ != 0.0 ? ext - g * (k1_ * u_[i]) : ext;
+        aprev_[i] = mixed ? a * m_inv_mass[tag[i]] : a;
+      }
+    }
   if (check != 0.0) {    // rare: find the first bead with a non-finite force
     for (int i = 0; i < nlocal; i++) {
       double fl = left[i] >= 0 ? fcon[left[i]] : 0.0;
@@ -529,6 +671,7 @@ void FixMdgranChain::compute(bigint step)
     }
   }
   power = damping != 0.0 ? damping * power : 0.0;
+  if (sub_damping != 0.0) power = power + sub_power;
   if (have_last) {
     double dv = 0.5 * (power + power_prev) * dt;
     if (nprocs == 1) d_visc_all += dv;
@@ -699,7 +842,7 @@ void FixMdgranChain::build_contacts()
 // Mean force over the compression interval, (V(d1) - V(d0)) / (d1 - d0) (Schwarz): in the
 // branch parameter t the mean of f(t) weighted by delta'(t) = 4 (t^3 - sigma) over [t0, t1];
 // f delta' is a polynomial of degree 9, so 5-point Gauss-Legendre is exact.
-double FixMdgranChain::mean_force(double d0, double d1) const
+double MdgranLaw::mean_force(double d0, double d1) const
 {
   double ta = t_of_delta(d0), tb = t_of_delta(d1);
   double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
@@ -763,9 +906,16 @@ void FixMdgranChain::drift(double h, int start)
 // over the atoms (a separate kick loop cost ~15% of a step, memory traffic).
 void FixMdgranChain::accelerate(double h, int last)
 {
+  if (extended) accelerate_t<true>(h, last);
+  else accelerate_t<false>(h, last);
+}
+
+// accelerate of the homogeneous chain (EXT false) or of unlike beads or a damped substrate
+template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
+{
   double *v = flat(atom->v), *f = flat(atom->f);
   double *const aprev_ = aprev;    // members as locals (see located_pass)
-  const double *const fcon_ = fcon, *const fkick_ = fkick, *const u_ = u;
+  const double *const fcon_ = fcon, *const fkick_ = fkick, *const u_ = u, *const w_ = w;
   const int *const left_ = left;
   const double k1_ = k1, k3_ = k3;
   const double hh = 0.5 * h;
@@ -777,8 +927,16 @@ void FixMdgranChain::accelerate(double h, int last)
     a = fl - fcon_[i];
     av = fvl - fkick_[i];
     double sub = k1_ * u_[i] + k3_ * u_[i] * u_[i] * u_[i];    // substrate: k1 u + k3 u^3
-    a -= sub;
-    av -= sub;
+    if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
+      const tagint t = atom->tag[i];
+      sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * w_[i]);
+      const double im = mixed ? m_inv_mass[t] : 1.0;
+      a = (a - sub) * im;
+      av = (av - sub) * im;
+    } else {
+      a -= sub;
+      av -= sub;
+    }
     check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
   };
   for (size_t r = 0; r < runs.size(); r += 2)
@@ -810,6 +968,12 @@ void FixMdgranChain::accelerate(double h, int last)
 // accelerate, contacts that may switch (flagged, h > 0).  Returns this rank's damping power
 // P = c sum (d delta/dt)^2 over its own closed contacts.
 double FixMdgranChain::located_pass(double h)
+{
+  return mixed ? located_pass_t<true>(h) : located_pass_t<false>(h);
+}
+
+// located_pass with the chain's one law (MIX false) or each contact's own (unlike beads)
+template <bool MIX> double FixMdgranChain::located_pass_t(double h)
 {
   ncompute++;
   const int nall = atom->nlocal + atom->nghost;
@@ -843,22 +1007,27 @@ double FixMdgranChain::located_pass(double h)
     double rate = w_[c.l] - w_[c.r];
     double F = 0.0, Fv = 0.0, g, gd;
     if (closed_[c.l] != 0.0) {
-      if (use_table && d > tab_delta_max)
-        error->one(FLERR, "compression {:.4g} beyond the contact table (delta_max = {:g}) at "
-                   "t = {:.12g}, contact {}", d, tab_delta_max, update->ntimestep * update->dt,
-                   contact_number(tag[c.l]));
-      F = located_force(d);
-      Fv = F;
-      if (h > 0.0 && d < sing_) {    // near snap-off: mean-force kick
-        double d0 = ustart(c.l) - ustart(c.r) - gap_;
-        Fv = 2.0 * mean_force(d0, d) - located_force(d0);
+      double off = delta_off_;
+      if constexpr (MIX) {
+        off = mixed_located(c, d, h, F, Fv);
+      } else {
+        if (use_table && d > tab_delta_max)
+          error->one(FLERR, "compression {:.4g} beyond the contact table (delta_max = {:g}) "
+                     "at t = {:.12g}, contact {}", d, tab_delta_max,
+                     update->ntimestep * update->dt, contact_number(tag[c.l]));
+        F = located_force(d);
+        Fv = F;
+        if (h > 0.0 && d < sing_) {    // near snap-off: mean-force kick
+          double d0 = ustart(c.l) - ustart(c.r) - gap_;
+          Fv = 2.0 * mean_force(d0, d) - located_force(d0);
+        }
       }
       if (damping_ != 0.0) {
         F += damping_ * rate;
         Fv += damping_ * rate;
         if (c.own) power += damping_ * rate * rate;
       }
-      g = d - delta_off_;
+      g = d - off;
       gd = rate;
     } else {
       g = -d;
@@ -869,7 +1038,32 @@ double FixMdgranChain::located_pass(double h)
     fcon_[c.l] = F;
     fkick_[c.l] = Fv;
   }
+  if (sub_damping != 0.0)    // the substrate's damping power, g c_s w^2 of the moving beads
+    for (size_t q = 0; q < runs.size(); q += 2)
+      for (int i = runs[q]; i < runs[q + 1]; i++)
+        power += (MIX ? m_on_site[tag[i]] : 1.0) * (sub_damping * w_[i] * w_[i]);
   return power;
+}
+
+// located_pass of a closed unlike contact c at compression d: its force F = A f(d / L) and
+// kick force Fv (the mean force near its snap-off, in its own units), its threshold returned
+inline double FixMdgranChain::mixed_located(const Con &c, double d, double h, double &F,
+                                            double &Fv)
+{
+  const tagint jt = atom->tag[c.l];
+  const MdgranLaw &law = laws[m_cls[jt]];
+  const double il = m_inv_len[jt], A = m_scale[jt], u1 = d * il;
+  if (law.use_table && u1 > law.tab_delta_max)
+    error->one(FLERR, "compression {:.4g} (own units) beyond the contact table (delta_max = "
+               "{:g}) at t = {:.12g}, contact {}", u1, law.tab_delta_max,
+               update->ntimestep * update->dt, contact_number(jt));
+  F = A * law.located_force(u1);
+  Fv = F;
+  if (h > 0.0 && u1 < law.sing) {
+    double u0 = (ustart(c.l) - ustart(c.r) - gap) * il;
+    Fv = A * (2.0 * law.mean_force(u0, u1) - law.located_force(u0));
+  }
+  return m_delta_off[jt];
 }
 
 // First s in [0, h] where g(s) = g0 + s g0' + s^2/2 g0'' of contact c falls to min(g0, 0),
@@ -883,8 +1077,9 @@ double FixMdgranChain::first_root(const Con &c, double h) const
   double d1 = u[c.l] - u[c.r] - gap;
   double g1;
   if (closed[c.l] != 0.0) {
-    g0 -= delta_off;
-    g1 = d1 - delta_off;
+    const double off = off_of(atom->tag[c.l]);
+    g0 -= off;
+    g1 = d1 - off;
   } else {
     g0 = -g0;
     b = -b;
@@ -966,7 +1161,7 @@ void FixMdgranChain::switch_contact(const Con &c, double time)
   double d = disp(c.l) - disp(c.r) - gap;
   if (closed[c.l] != 0.0) {
     closed[c.l] = 0.0;
-    add_event(c, 0, time, law_energy(d));
+    add_event(c, 0, time, mixed ? mixed_energy(atom->tag[c.l], d) : law_energy(d));
   } else {
     closed[c.l] = 1.0;
     add_event(c, 1, time, 0.0);
@@ -987,7 +1182,7 @@ void FixMdgranChain::settle(std::vector<int> &list, double time)
       const Con &c = cons[list[k]];
       double d = disp(c.l) - disp(c.r) - gap;
       double rate = vel(c.l) - vel(c.r);
-      double g = closed[c.l] != 0.0 ? d - delta_off : -d;
+      double g = closed[c.l] != 0.0 ? d - off_of(atom->tag[c.l]) : -d;
       double gd = closed[c.l] != 0.0 ? rate : -rate;
       if (g < -STATE_TOL || (g <= 0.0 && gd < 0.0)) {
         if (++count[k] > MAX_SWITCHES)
@@ -1137,6 +1332,15 @@ double FixMdgranChain::compute_scalar()
   }
   // e += law_energy(delta) in that order, the branch parameters T_BLOCK at a time
   double t[T_BLOCK];
+  if (mixed) {    // each contact's own law (its left atom's tag, in the same order)
+    size_t k = 0;
+    for (int i = 0; i < nlocal; i++) {
+      if (closed[i] == 0.0 || atom->tag[i] >= (tagint) atom->natoms) continue;
+      if (atom->map(atom->tag[i] + 1) < 0) continue;
+      e += mixed_energy(atom->tag[i], deltas[k++]);
+    }
+    deltas.clear();
+  }
   for (size_t b = 0; b < deltas.size(); b += T_BLOCK) {
     const int n = (int) std::min<size_t>(T_BLOCK, deltas.size() - b);
     if (!hertz) t_of_delta_n(&deltas[b], t, n);
@@ -1147,7 +1351,8 @@ double FixMdgranChain::compute_scalar()
     for (int i = 0; i < nlocal; i++) {
       if (!moves(i)) continue;
       double ui = atom->x[i][0] - x0[i];
-      e += 0.5 * k1 * ui * ui + 0.25 * k3 * ui * ui * ui * ui;
+      double es = 0.5 * k1 * ui * ui + 0.25 * k3 * ui * ui * ui * ui;
+      e += mixed ? m_on_site[atom->tag[i]] * es : es;
     }
   double all = e;
   if (comm->nprocs > 1) MPI_Allreduce(&e, &all, 1, MPI_DOUBLE, MPI_SUM, world);

@@ -11,7 +11,49 @@
 
 namespace LAMMPS_NS {
 
-class FixMdgranChain : public Fix {
+// One contact law in its own units (mdgran/contact.py's ContactLaw and ContactTable): the
+// chain's law, and with "mixture" the law of each class of unlike pairs.
+struct MdgranLaw {
+  int hertz = 0;                            // 1: f = delta_+^(3/2); 0: Schwarz
+  double fc = 0.0, sigma = 0.0, tm = 0.0, big = 0.0, sqrt_big = 0.0, delta_min = 0.0;
+  double delta_off = 0.0, t0 = 0.0;
+  double p_t0 = 0.0;                        // P(t0): V(delta) = P(t(delta)) - P(t0)
+  int strict = 0;                           // delta_off == 0: strict inequalities
+  double sing = -INFINITY;                  // located: mean-force kick below this delta
+  // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
+  int use_table = 0, tab_n = 0;
+  double tab_base = 0.0, tab_scale = 0.0, tab_h = 0.0, tab_delta_max = 0.0;
+  std::vector<double> tab_coef;             // (n - 1) x 4, highest power first
+
+  void set(int hertz_law, double fc_law, int snap_force);    // the constants of contact.py
+  std::string read_table(const char *file);    // "" or what is wrong
+  double law_force(double delta) const;     // attached branch, exact (Newton) or table
+  double mean_force(double d0, double d1) const;    // (V(d1) - V(d0)) / (d1 - d0), Schwarz
+  double law_energy(double delta) const;    // V(delta) on the attached branch, exact
+  double exact_force(double delta) const;
+  // cubic spline in w = sqrt(delta - base), as ContactTable.force (Horner, highest power first)
+  inline double spline_force(double d) const
+  {
+    double w = std::sqrt(std::max(d - tab_base, 0.0));
+    double s = std::min(w * tab_scale, (double) (tab_n - 1) - 1e-9);
+    long i = (long) s;
+    double x = (s - (double) i) * tab_h;
+    const double *c = &tab_coef[4 * i];
+    return ((c[0] * x + c[1]) * x + c[2]) * x + c[3];
+  }
+  // f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free
+  // of its round-off force at delta = 0, which would make resting contacts flicker), else as set
+  inline double located_force(double d) const
+  {
+    return (hertz || !use_table) ? exact_force(d) : spline_force(d);
+  }
+  double t_of_delta(double delta) const;
+  void t_of_delta_n(const double *delta, double *t, int n) const;
+  double antiderivative(double t) const;
+};
+
+// The chain's own law is its MdgranLaw base (the law's members and functions by their names).
+class FixMdgranChain : public Fix, public MdgranLaw {
  public:
   FixMdgranChain(class LAMMPS *, int, char **);
   ~FixMdgranChain() override;
@@ -43,39 +85,32 @@ class FixMdgranChain : public Fix {
   void unpack_forward_comm(int, int, double *) override;
   double memory_usage() override;
 
-  // ---- the contact law (public: the unit test calls them through a tiny driver) ----------
-  double law_force(double delta) const;     // attached branch, exact (Newton) or table
-  double mean_force(double d0, double d1) const;    // (V(d1) - V(d0)) / (d1 - d0), Schwarz
-  double law_energy(double delta) const;    // V(delta) on the attached branch, exact
-  double exact_force(double delta) const;
-  // cubic spline in w = sqrt(delta - base), as ContactTable.force (Horner, highest power first)
-  inline double spline_force(double d) const
-  {
-    double w = std::sqrt(std::max(d - tab_base, 0.0));
-    double s = std::min(w * tab_scale, (double) (tab_n - 1) - 1e-9);
-    long i = (long) s;
-    double x = (s - (double) i) * tab_h;
-    const double *c = &tab_coef[4 * i];
-    return ((c[0] * x + c[1]) * x + c[2]) * x + c[3];
-  }
+  // the contact law: MdgranLaw's (public: the unit test calls them through a tiny driver)
 
  private:
-  // law constants (names of mdgran/contact.py)
-  int hertz;                                // 1: f = delta_+^(3/2); 0: Schwarz
-  double fc, sigma, tm, big, sqrt_big, delta_min, delta_off, t0;
-  double p_t0;                              // P(t0): V(delta) = P(t(delta)) - P(t0)
-  int strict;                               // delta_off == 0: strict inequalities
   int snap_force;                           // snap-off rule: 0 displacement, 1 force
   double damping, k1, k3, gap;
   double tether;                            // quantized: the linear substrate's K (0: none)
   int integrate;                            // quantized: the fix moves the atoms (fix nve's)
   void nve(int first);
   int walls;
-  // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
-  int use_table, tab_n;
-  double tab_base, tab_scale, tab_h, tab_delta_max;
-  std::vector<double> tab_coef;             // (n - 1) x 4, highest power first
   std::string table_file;
+
+  // ---- unlike beads ("mixture FILE") and substrate damping ("sub_damping c") --------------
+  // By tag (entry 0 unused): bead 1/mass and substrate factor g, and for the contact whose
+  // left atom has the tag its scales A, 1/L, L (F = A f(delta / L), V = A L V(delta / L)),
+  // threshold L delta_off and law class.  extended: either is set (else none is read).
+  int mixed, extended;
+  double sub_damping;
+  std::vector<double> m_inv_mass, m_on_site, m_scale, m_inv_len, m_length, m_delta_off;
+  std::vector<int> m_cls;
+  std::vector<MdgranLaw> laws;              // the classes' laws, own units
+  void read_mixture(const char *file);
+  double mixed_force(tagint jt, double d, int located_law) const;
+  double mixed_energy(tagint jt, double d) const;
+  struct Con;
+  double mixed_located(const Con &c, double d, double h, double &F, double &Fv);
+  inline double off_of(tagint jt) const { return mixed ? m_delta_off[jt] : delta_off; }
 
   // per-atom state, keyed by the atom: its initial x and the contact to its right
   double *x0;                               // initial x (displacement u = x - x0)
@@ -113,7 +148,6 @@ class FixMdgranChain : public Fix {
 
   // ---- located events (events located): the fix integrates the chain itself --------------
   int located;                              // 1: events located inside the step; 0: quantized
-  double sing;                              // mean-force kick below this delta (else -inf)
   struct Con {
     int l, r, own;                          // local left and right atom; own: left is owned
   };
@@ -128,13 +162,9 @@ class FixMdgranChain : public Fix {
   int contacts_stale;                       // cons and left[] need rebuilding (re-neighboured)
   double drift_h;                           // h of the drift that left the owned atoms' u, w
                                             // for the next pass (-1: none)
-  // f(delta) of a closed contact in located mode: Hertz exact (cheaper than the table and free
-  // of its round-off force at delta = 0, which would make resting contacts flicker), else as set
-  inline double located_force(double d) const
-  {
-    return (hertz || !use_table) ? exact_force(d) : spline_force(d);
-  }
   double located_pass(double h);
+  template <bool MIX> double located_pass_t(double h);
+  template <bool EXT> void accelerate_t(double h, int last);
   void drift(double h, int start);
   void accelerate(double h, int last);
   void located_step();
@@ -152,11 +182,8 @@ class FixMdgranChain : public Fix {
   // first element of a LAMMPS per-atom array of rows (x, v, f: one block, 3 per atom)
   static double *flat(double **a) { return a ? a[0] : nullptr; }
 
-  double t_of_delta(double delta) const;
-  void t_of_delta_n(const double *delta, double *t, int n) const;
-  double antiderivative(double t) const;
-  void read_table(const char *file);
   void compute(bigint step);
+  template <bool MIX> void compute_t(bigint step);
   void sync();
   tagint ntags;                             // atom->natoms: the last tag (a wall with walls)
   inline int is_wall(tagint t) const { return walls && (t == 1 || t == ntags); }
