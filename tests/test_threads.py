@@ -101,3 +101,25 @@ def test_any_segment_size_keeps_the_trajectory(n, segment, free, locate, gap):
     d1 = np.asarray(cut.trajectory.ledger["dissipated_viscous"])
     assert np.max(np.abs(d1 - d0)) <= 64 * np.finfo(float).eps * max(d0.max(), 1e-300)
     assert abs(cut.max_ledger_error - whole.max_ledger_error) <= 1e-12
+
+
+def _forked_case(_):
+    scene = load_scene("micro-star", [("chain.n", 5000), ("run.duration", 1.0)])
+    res = run(scene, "fast", threads=2)
+    return res.status, res.stats["threads"], res.trajectory.x[-1]
+
+
+def test_a_process_forked_after_threads_runs_on_one():
+    """GNU OpenMP stops a forked child that starts threads again (a sweep's workers are
+    forked): after this process ran threads, a forked child runs the pass on one thread and
+    gets the same result."""
+    import multiprocessing
+
+    status, threads, x = _forked_case(0)
+    assert (status, threads) == ("complete", 2)
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        [(c_status, c_threads, c_x)] = pool.map(_forked_case, [0], chunksize=1)
+    from numba import threading_layer
+    assert c_status == "complete"
+    assert c_threads == (1 if threading_layer() == "omp" else 2)
+    assert np.array_equal(c_x, x)

@@ -63,11 +63,26 @@ BLOCK_BEAD_STEPS = 1_000_000
 MAX_LAW_TABLES = 255
 
 
+#: the pid of the process whose threads ran on GNU OpenMP (numba's "omp" layer), if any
+_openmp_pid = None
+
+
+def note_threads_ran() -> None:
+    """Remember that this process ran the pass on numba's threads (after the first run)."""
+    global _openmp_pid
+    if _openmp_pid is None and numba.threading_layer() == "omp":
+        _openmp_pid = os.getpid()
+
+
 def usable_threads(threads: int) -> int:
     """Threads for the pass: ``threads``, or for 0 every core this process may use; at most
-    numba's pool (``NUMBA_NUM_THREADS``)."""
+    numba's pool (``NUMBA_NUM_THREADS``).  One in a process forked from one whose threads ran
+    on GNU OpenMP, which cannot start threads again after a fork (it would stop the process:
+    "fork() called from a process already using GNU OpenMP"); the result is the same."""
     if threads < 0:
         raise SceneError("run.threads", f"must be an integer >= 0, not {threads}")
+    if _openmp_pid is not None and _openmp_pid != os.getpid():
+        return 1
     if threads == 0:
         threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
             else (os.cpu_count() or 1)
@@ -348,6 +363,8 @@ class FastBackend(Backend):
             if self.flags.threaded:
                 numba.set_num_threads(self.threads)
             done = self.advance(*kernel_args, fk.plain(block), i, nframes, spf, self.dt)
+            if self.flags.threaded:
+                note_threads_ran()
             stats["kernel_s"] += clock() - k0
             times = out_times[i:i + done].tolist()
             bad = None  # a non-finite state: the frames before it, then the error
