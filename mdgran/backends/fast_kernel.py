@@ -96,7 +96,7 @@ STATE_TOL = 1e-12
 FLAG_CAP = 64  # flagged contacts remembered per pass (beyond: all contacts are scanned)
 CHAT_CAP = 64
 #: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
-#: displacement rule); see `verlet_pass`.
+#: displacement rule); see `segment_pass`.
 SING_BAND = 0.1
 #: Contacts per segment of a pass (:class:`Segments`): the unit the threads share.  It depends
 #: on nothing but this constant, so a run's result does not depend on the thread count; a
