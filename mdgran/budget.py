@@ -36,7 +36,7 @@ def term_budget(run) -> dict:
     stored frames and contact states."""
     scene = run.scene
     m = model_from_scene(scene)
-    e_imp = scene.impulse_energy or 1.0
+    e_imp = scene.energy_scale or 1.0
     closed = run.closed
     x, v = run.x, run.v
     f_law = np.zeros(len(run.time))

@@ -24,6 +24,11 @@ the substrate's damping ``c_s`` (``substrate.damping``, dissipation booked as vi
 
 Without a mixture every mass is 1 and every contact has ``law`` (the homogeneous chain, whose
 arithmetic is unchanged).
+
+**Excitations** (``drive``, :mod:`mdgran.drive`): a force pulse ``F(t)`` on one bead, and a
+base motion ``u_b(t)`` under the substrate, whose terms then act on ``x_i - u_b`` and ``x_i' -
+u_b'``; their work is the ledger's ``external_work``.  The dynamics take the time ``t`` for
+them (ignored without a drive).
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ import numpy as np
 
 from .contact import ContactLaw
 from .contact_scalar import branch_t_ufunc, pow_ufunc
+from .drive import Drive
 from .mixture import Mixture
 
 
@@ -115,6 +121,7 @@ class ChainModel:
     substrate_damping: float = 0.0  # c_s: force -c_s v on each bead on the substrate
     temperature: float = 0.0  # initial random velocities, variance temperature / m_i
     seed: int = 0  # of those velocities
+    drive: Drive | None = field(default=None, compare=False)  # force pulse, base motion
     walls: bool = field(init=False)
 
     def __post_init__(self):
@@ -199,9 +206,14 @@ class ChainModel:
             f = f + self.damping * self.differences(v)
         return np.where(closed, f, 0.0)
 
-    def substrate_force(self, x, v=None):
+    def substrate_force(self, x, v=None, t=0.0):
         """``-g_i (k1 x_i + k3 x_i^3 + c_s v_i)`` [n] (``c_s`` with ``v`` given), or None
-        when the scene has no substrate term."""
+        when the scene has no substrate term; with a base motion, of ``x_i - u_b(t)`` and
+        ``v_i - u_b'(t)``."""
+        if self.drive is not None and self.drive.base is not None:
+            ub, vb = self.drive.base_at(t)
+            x = x - ub
+            v = None if v is None else v - vb
         s = None
         if self.k3:
             s = -(self.k1 + self.k3 * x * x) * x
@@ -213,32 +225,57 @@ class ChainModel:
             s = self.mixture.substrate * s
         return s
 
-    def free_acceleration(self, x, v):
-        """Acceleration with every contact open: the substrate alone (over the masses)."""
-        s = self.substrate_force(x, v)
+    def free_acceleration(self, x, v, t=0.0):
+        """Acceleration with every contact open: the substrate (and a pulse) alone, over the
+        masses."""
+        s = self._add_pulse(self.substrate_force(x, v, t), t)
         if s is None:
             return np.zeros(self.n)
         return self._per_mass(s)
+
+    def _add_pulse(self, force, t):
+        """``force`` [n] (or None: zero) plus the pulse's force at t on its bead."""
+        if self.drive is None or self.drive.pulse is None:
+            return force
+        p = self.drive.pulse
+        force = np.zeros(self.n) if force is None else force.copy()
+        force[p.bead] += p.force(t)
+        return force
 
     def _per_mass(self, force):
         if self.mixture is not None and not self.mixture.uniform_mass:
             return force / self.mixture.mass
         return force
 
-    def acceleration(self, x, v, closed):
+    def acceleration(self, x, v, closed, t=0.0):
         a = self._apply(self.contact_forces(x, v, closed))
-        s = self.substrate_force(x, v)
+        s = self._add_pulse(self.substrate_force(x, v, t), t)
         return self._per_mass(a if s is None else a + s)
 
-    def viscous_power(self, v, closed):
+    def external_power(self, x, v, t) -> float:
+        """Rate of the excitations' work (eta p q): ``F(t) v_b + u_b'(t) sum_i F_sub,i``
+        (:mod:`mdgran.drive`); 0 without a drive."""
+        if self.drive is None:
+            return 0.0
+        p = 0.0
+        if self.drive.pulse is not None:
+            p += self.drive.pulse.force(t) * float(v[self.drive.pulse.bead])
+        if self.drive.base is not None:
+            s = self.substrate_force(x, v, t)
+            p += self.drive.base_at(t)[1] * float(np.sum(s))
+        return p
+
+    def viscous_power(self, v, closed, t=0.0):
         """Rate of viscous dissipation, ``sum_closed c (d delta/dt)^2`` plus the substrate's
-        ``sum_i g_i c_s v_i^2``."""
+        ``sum_i g_i c_s v_i^2`` (``v_i - u_b'(t)`` with a base motion)."""
         p = 0.0
         if self.damping:
             dv = self.differences(v)
             p = self.damping * float(np.sum(np.where(closed, dv * dv, 0.0)))
         if self.substrate_damping:
             g = 1.0 if self.mixture is None else self.mixture.substrate
+            if self.drive is not None and self.drive.base is not None:
+                v = v - self.drive.base_at(t)[1]
             p += self.substrate_damping * float(np.sum(g * v * v))
         return p
 
@@ -279,7 +316,10 @@ class ChainModel:
         pw = pow_ufunc()  # the C library's pow, as ContactLaw.energy (bitwise)
         return (0.4 * pw(t, 10.0) - c7 * pw(t, 7.0) + c4 * pw(t, 4.0) - c1 * t) - a0
 
-    def substrate_energy(self, x) -> float:
+    def substrate_energy(self, x, t=0.0) -> float:
+        """``sum_i g_i (k1 y_i^2 / 2 + k3 y_i^4 / 4)``, ``y_i = x_i - u_b(t)``."""
+        if self.drive is not None and self.drive.base is not None:
+            x = x - self.drive.base_at(t)[0]
         if self.mixture is not None and self.mixture.free_beads:
             x = x * np.sqrt(self.mixture.substrate)  # g_i is 0 or 1
         e = 0.0
@@ -289,21 +329,28 @@ class ChainModel:
             e += 0.25 * self.k3 * float(np.sum(x**4))
         return e
 
-    def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis) -> dict:
-        """The energy ledger of physics.md section 4 for one state."""
+    def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
+               external_work=0.0, t=0.0) -> dict:
+        """The energy ledger of physics.md section 4 for one state at time t, with the
+        excitations' work ``external_work`` (:mod:`mdgran.drive`): ``total = kinetic +
+        contact + substrate + dissipated - external_work``."""
         led = {
             "kinetic_energy": self.kinetic_energy(v),
             "contact_energy": self.contact_energy(x, closed),
-            "substrate_energy": self.substrate_energy(x),
+            "substrate_energy": self.substrate_energy(x, t),
             "dissipated_viscous": float(dissipated_viscous),
             "dissipated_hysteresis": float(dissipated_hysteresis),
         }
-        led["total_energy"] = sum(led.values())
+        total = sum(led.values())
+        led["external_work"] = float(external_work)
+        led["total_energy"] = total - led["external_work"]
         return led
 
-    def ledger_block(self, x, v, closed, dissipated_viscous, dissipated_hysteresis) -> dict:
+    def ledger_block(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
+                     external_work=None, t=None) -> dict:
         """:meth:`ledger` of ``F`` states at once: ``x``, ``v`` [F, n], ``closed``
-        [F, n_contacts], the dissipated energies [F]; each term an array [F].
+        [F, n_contacts], the dissipated energies, the external work and the times [F] (the
+        last two None: 0); each term an array [F].
 
         Bitwise equal to :meth:`ledger` row by row: the same operations on every element in
         the same order, and the row sums are numpy's (pairwise, per row, as for one state)
@@ -318,6 +365,8 @@ class ChainModel:
         if self.gap:
             delta = delta - self.gap
         contact = np.sum(np.where(closed, self.contact_law_energy(delta), 0.0), axis=1)
+        if self.drive is not None and self.drive.base is not None:
+            x = x - self.drive.base.position(t)[:, None]
         if mix is not None and mix.free_beads:
             x = x * np.sqrt(mix.substrate)
         substrate = np.zeros(len(x))
@@ -335,12 +384,16 @@ class ChainModel:
         total = 0.0  # the terms added in the order of ledger()'s sum(led.values())
         for term in led.values():
             total = total + term
-        led["total_energy"] = total
+        work = np.zeros(len(x)) if external_work is None else np.asarray(external_work, float)
+        led["external_work"] = work
+        led["total_energy"] = total - work
         return led
 
-    def ledger_rows(self, x, v, closed, dissipated_viscous, dissipated_hysteresis) -> list:
+    def ledger_rows(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
+                    external_work=None, t=None) -> list:
         """:meth:`ledger_block` as one :meth:`ledger` dict (of floats) per state."""
-        led = self.ledger_block(x, v, closed, dissipated_viscous, dissipated_hysteresis)
+        led = self.ledger_block(x, v, closed, dissipated_viscous, dissipated_hysteresis,
+                                external_work, t)
         names = tuple(led)
         return [dict(zip(names, row)) for row in zip(*(led[k].tolist() for k in names))]
 
@@ -460,4 +513,5 @@ def model_from_scene(scene) -> "ChainModel":
         substrate_damping=float(d["substrate"]["damping"]),
         temperature=float(d["thermal"]["temperature"]),
         seed=int(d["thermal"]["seed"]),
+        drive=scene.drive,
     )

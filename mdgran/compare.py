@@ -318,7 +318,7 @@ def grazing_test(scene, ref: "BackendRuns", other: "BackendRuns"):
 
 
 def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list, dict]:
-    scale = scene.impulse_energy or 1.0
+    scale = scene.energy_scale or 1.0
     t = ref.nominal.time
     th = horizon(t, ref.error, other.error)
     k = int(np.searchsorted(t, th, side="right"))

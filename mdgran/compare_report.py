@@ -48,7 +48,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    scale = scene.impulse_energy or 1.0
+    scale = scene.energy_scale or 1.0
     styles = ["-", "--", ":", "-."]
     # energies
     fig, ax = plt.subplots(figsize=(11, 4.5))

@@ -32,7 +32,7 @@ import numpy as np
 
 from . import checkpoint
 from .storage import OutputLock, StorageError, abandon, reason
-from .run_record import LEDGER_NAMES, Run
+from .run_record import LEDGER_NAMES, Run, ledger_terms
 
 #: at most this many frames buffered in memory between writes (a run of micro-star, 4001
 #: frames, is written at its close in one append per dataset: 8 appends of 512 frames took
@@ -306,7 +306,8 @@ class H5MDWriter:
                  if f"particles/chain/{name}" in f]
         contacts = [f"observables/contacts/{name}" for name in CONTACT_SERIES
                     if f"observables/contacts/{name}" in f]
-        return chain + [f"observables/{name}" for name in LEDGER_NAMES] + contacts
+        terms = [f"observables/{name}" for name in LEDGER_NAMES if f"observables/{name}" in f]
+        return chain + terms + contacts
 
     def _rows(self, meta) -> dict:
         """Dataset path -> rows that a checkpoint with ``meta`` continues (checksummed)."""
@@ -324,7 +325,8 @@ class H5MDWriter:
         self._series = {name: {k: chain[f"{name}/{k}"] for k in ("step", "time", "value")}
                         for name in ("displacement", "velocity", "position") if name in chain}
         self.positions = "position" in chain
-        for name in LEDGER_NAMES:
+        self.terms = tuple(name for name in LEDGER_NAMES if name in obs)
+        for name in self.terms:
             self._series[name] = {k: obs[f"{name}/{k}"] for k in ("step", "time", "value")}
         self.contacts = "contacts/compression" in obs
         self._contact_model()
@@ -341,7 +343,7 @@ class H5MDWriter:
         self.resume_e0 = float(tot[0])
         self.resume_max_error = float(np.max(np.abs(tot - tot[0]))) if len(tot) else 0.0
         self.resume_term_max = max((float(np.max(np.abs(self._series[k]["value"][()])))
-                                    for k in LEDGER_NAMES if len(tot)), default=0.0)
+                                    for k in self.terms if len(tot)), default=0.0)
         if self.positions:
             sc = self.scene.scales
             self._pos_scale, self._t_scale = (sc.p * 1e9, sc.time * 1e12) if sc else (1.0, 1.0)
@@ -404,7 +406,8 @@ class H5MDWriter:
             beads["box"] = box
             beads["position"] = chain["position"]
         obs = f.create_group("observables")
-        for name in LEDGER_NAMES:
+        self.terms = ledger_terms(self.scene)
+        for name in self.terms:
             self._series[name] = self._make_series(obs, name, ())
         model = self._contact_model()
         if not self.stride:  # no per-contact series
@@ -563,7 +566,7 @@ class H5MDWriter:
             times = np.array([b[1] for b in self._buf])
             if "displacement" in self._series:  # not with output.bead_stride = 0
                 self._flush_beads(steps, times)
-            for name in LEDGER_NAMES:
+            for name in self.terms:
                 self._append(f"observables/{name}", self._series[name], steps, times,
                              np.array([b[4][name] for b in self._buf]))
             for name in CONTACT_SERIES:

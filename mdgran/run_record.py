@@ -16,7 +16,18 @@ import numpy as np
 from .chain import contact_numbers, initial_states, replay_states
 
 LEDGER_NAMES = ("kinetic_energy", "contact_energy", "substrate_energy",
-                "dissipated_viscous", "dissipated_hysteresis", "total_energy")
+                "dissipated_viscous", "dissipated_hysteresis", "external_work", "total_energy")
+
+#: ledger terms that files written before them lack (read as 0 at every frame)
+OPTIONAL_TERMS = ("external_work",)
+
+
+def ledger_terms(scene) -> tuple:
+    """The ledger terms a file of ``scene`` stores: :data:`LEDGER_NAMES`, without
+    ``external_work`` for a scene without excitations (it would be 0 at every frame)."""
+    if scene.drive is not None:
+        return LEDGER_NAMES
+    return tuple(name for name in LEDGER_NAMES if name not in OPTIONAL_TERMS)
 
 
 class DecimatedRecord(ValueError):
@@ -233,7 +244,10 @@ class Run:
 
     def ledger_scale(self) -> float:
         """The energy ledger errors are measured in (:func:`ledger_scale`)."""
-        return ledger_scale(self.impulse_energy, self.e0)
+        drive = (bool(self._data.get("pulse", {}).get("amplitude"))
+                 or self._data.get("base", {}).get("kind", "none") != "none")
+        e_in = self.scene.energy_scale if drive else self.impulse_energy
+        return ledger_scale(e_in, self.e0)
 
     def ledger_error(self, scale: float | None = None) -> np.ndarray:
         """``(total_energy(t) - E0) / scale`` over the frames; ``scale`` defaults to
@@ -289,11 +303,15 @@ def read_h5(path) -> Run:
     with h5py.File(path, "r") as f:
         missing = [g for g in ("particles/chain", "events", "parameters") if g not in f]
         missing += [f"observables/{name}" for name in LEDGER_NAMES
-                    if f"observables/{name}" not in f]
+                    if f"observables/{name}" not in f and name not in OPTIONAL_TERMS]
         if missing:
             raise ValueError(f"{path}: not an mdgran H5MD file (no /{missing[0]})")
         chain = f["particles/chain"]
-        led = {name: f[f"observables/{name}/value"][()] for name in LEDGER_NAMES}
+        led = {name: f[f"observables/{name}/value"][()] for name in LEDGER_NAMES
+               if f"observables/{name}" in f}
+        for name in OPTIONAL_TERMS:  # a file of an mdgran before them: 0 at every frame
+            led.setdefault(name, np.zeros_like(led["total_energy"]))
+        led = {name: led[name] for name in LEDGER_NAMES}
         attrs = {k: (v.decode() if isinstance(v, bytes) else v)
                  for k, v in f["parameters"].attrs.items()}
         bead_ids = chain["id"][()] if "id" in chain else None

@@ -56,6 +56,8 @@ from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
 
+import numpy as np
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
@@ -90,6 +92,8 @@ LIMITS = {
     "beads.spread": (0.0, 0.9),
     "substrate.damping": (0.0, 1e3),
     "thermal.temperature": (0.0, 1e6),
+    "pulse.amplitude": (-1e4, 1e4),
+    "base.values": (-1e6, 1e6),
 }
 
 class Key(NamedTuple):
@@ -111,6 +115,8 @@ _FREQ = "(stiffer, the substrate period falls below 6e-3 time units)"
 _RATIO = "[1e-3, 1e3]"
 #: beads.pattern values (mdgran.mixture.pattern_diameters)
 PATTERNS = ("uniform", "dimer", "tapered", "intruder", "random")
+#: base.kind values (mdgran.drive)
+BASE_KINDS = ("none", "displacement", "acceleration")
 _MAT = "required in a [material]"
 
 #: section -> key -> :class:`Key`.  The one source of the keys, their defaults, ranges and units
@@ -267,6 +273,31 @@ SCHEMA = {
         "seed": Key(0, "int>=0", "an integer >= 0", "", "seed of those velocities (numpy's "
                     "default_rng)"),
     },
+    "pulse": {
+        "amplitude": Key(0.0, "float", "a number with |A| <= 1e4 (units of eta; 0: no pulse)",
+                         "eta", "half-sine force pulse A sin(pi (t - t0) / T) on pulse.bead for "
+                         "t0 <= t <= t0 + T (docs/excitation.md); 0: none"),
+        "duration": Key(None, "float>0?", "a finite number > 0", "1/q",
+                        "the pulse's duration T", "needed by a pulse"),
+        "start": Key(None, "float>=0?", "a finite number >= 0", "1/q", "the pulse's start t0",
+                     "0 (with a pulse)"),
+        "bead": Key(None, "int>=1?", "an integer from 1 to chain.n", "",
+                    "the bead the pulse pushes (1-based; positive A towards bead n)",
+                    "1 (with a pulse)"),
+    },
+    "base": {
+        "kind": Key("none", BASE_KINDS, "one of " + ", ".join(repr(x) for x in BASE_KINDS), "",
+                    "motion of the substrate's base, whose springs and dampers then act on x - "
+                    "u_b and v - u_b' (docs/excitation.md): 'displacement' or 'acceleration' "
+                    "samples in base.values; 'none': a fixed base"),
+        "interval": Key(None, "float>0?", "a finite number > 0", "1/q",
+                        "time between the samples of base.values (the first at t = 0)",
+                        "needed by a base motion"),
+        "values": Key(None, "values?", "a list of 2 to 1e6 numbers, each within +-1e6", "p or p q^2",
+                      "the samples: displacements u_b (the first 0; a clamped cubic spline "
+                      "through them) or accelerations u_b'' (linear between samples, "
+                      "integrated from rest at 0)", "needed by a base motion"),
+    },
     "meta": {
         "description": Key("", "str", "a string", "", "what the scene is; first line is listed "
                            "by mdgran scenes"),
@@ -310,6 +341,10 @@ def _check_value(key: str, value, kind, allowed: str):
         if value < (0 if kind.rstrip("?") == "int>=0" else 1):
             raise SceneError(key, f"must be {allowed}, not {value}")
         return value
+    if kind == "values?":
+        if not isinstance(value, list) or not 2 <= len(value) <= 1_000_000:
+            raise SceneError(key, f"must be {allowed}")
+        return [_check_value(key, v, "float", allowed) for v in value]
     if kind.rstrip("?") == "ratios" and isinstance(value, list):
         if not value:
             raise SceneError(key, f"must be {allowed}, not an empty list")
@@ -414,6 +449,24 @@ class Scene:
         mix = self.mixture
         m = 1.0 if mix is None else float(mix.mass[int(self.data["impulse"]["bead"]) - 1])
         return 0.5 * m * v0**2
+
+    @cached_property
+    def drive(self):
+        """The scene's force pulse and base motion (:class:`mdgran.drive.Drive`), or None."""
+        from .drive import drive_from_scene
+
+        return drive_from_scene(self)
+
+    @property
+    def energy_scale(self) -> float:
+        """The energy ledger errors are measured in (units eta p): :attr:`impulse_energy`
+        plus the excitations' (:meth:`mdgran.drive.Drive.energy`); the impulse energy alone
+        for a scene without them."""
+        if self.drive is None:
+            return self.impulse_energy
+        mix = self.mixture
+        mass = np.ones(self.data["chain"]["n"]) if mix is None else mix.mass
+        return self.impulse_energy + self.drive.energy(mass)
 
     def with_overrides(self, overrides) -> "Scene":
         """This scene with ``(key, value)`` overrides: the same keys and rules as
@@ -542,10 +595,48 @@ def _resolve(raw: dict):
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
     _check_beads(data, raw)
+    _check_drive(data)
     if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
         raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
                          "per-bead or per-contact series); give a stride >= 1 to store them")
     return data, sources
+
+
+def _check_drive(data: dict):
+    """[pulse] and [base]: the pulse's bead in the chain, keys that refine a pulse only with
+    one; a base motion with its interval and samples (a displacement series starting at 0),
+    which need a substrate to act through; no base keys without a base motion."""
+    p, b, n = data["pulse"], data["base"], data["chain"]["n"]
+    if not p["amplitude"]:
+        given = [k for k in ("duration", "start", "bead") if p[k] is not None]
+        if given:
+            raise SceneError(f"pulse.{given[0]}", "refines a pulse and needs pulse.amplitude "
+                             "(not 0)")
+    else:
+        if p["duration"] is None:
+            raise SceneError("pulse.duration", "missing: a pulse needs its duration")
+        p["start"] = 0.0 if p["start"] is None else p["start"]
+        p["bead"] = 1 if p["bead"] is None else p["bead"]
+        if p["bead"] > n:
+            raise SceneError("pulse.bead", f"must be an integer from 1 to chain.n = {n}, not "
+                             f"{p['bead']}")
+    if b["kind"] == "none":
+        given = [k for k in ("interval", "values") if b[k] is not None]
+        if given:
+            raise SceneError(f"base.{given[0]}", "describes a base motion and needs base.kind "
+                             "= 'displacement' or 'acceleration'")
+        return
+    for name in ("interval", "values"):
+        if b[name] is None:
+            raise SceneError(f"base.{name}", f"missing: base.kind = {b['kind']!r} needs "
+                             "base.interval and base.values")
+    if b["kind"] == "displacement" and b["values"][0] != 0.0:
+        raise SceneError("base.values", "a displacement series must start at 0 (the base "
+                         f"starts at rest at 0), not {b['values'][0]}")
+    s = data["substrate"]
+    if not (s["k1"] or s["k3"] or s["damping"]):
+        raise SceneError("base.kind", "a base motion acts through the substrate: give "
+                         "substrate.k1, substrate.k3 or substrate.damping")
 
 
 #: beads.* keys each pattern uses besides the per-bead ratios (a key given that the pattern

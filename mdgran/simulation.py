@@ -251,7 +251,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
                                      label=f"{scene.name} [{b.name}]"))
     e0 = writer.resume_e0 if start is not None else None
-    scale = ledger_scale(scene.impulse_energy, 0.0 if e0 is None else e0)  # set again at E0
+    scale = ledger_scale(scene.energy_scale, 0.0 if e0 is None else e0)  # set again at E0
     max_err = writer.resume_max_error / scale if start is not None else 0.0
     term_max = writer.resume_term_max if start is not None else 0.0  # largest |ledger term|
     status, err = "complete", None
@@ -264,7 +264,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
                 led = frame.ledger(model)  # from the frame's block, if the backend made one
                 if e0 is None:
                     e0 = led["total_energy"]
-                    scale = ledger_scale(scene.impulse_energy, e0)
+                    scale = ledger_scale(scene.energy_scale, e0)
                 max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0,
                                                                  scale)))
                 term_max = max(term_max, max(map(abs, led.values())))

@@ -71,6 +71,7 @@ class Frame:
     events: list = field(default_factory=list)  # Events in (previous frame time, time]
     ledger_block: "LedgerBlock | None" = None
     block_row: int = 0
+    external_work: float = 0.0  # work of the force pulse and base motion (mdgran.drive)
 
     def ledger(self, model) -> dict:
         """The energy ledger of this frame (:meth:`~mdgran.chain.ChainModel.ledger` of
@@ -78,21 +79,23 @@ class Frame:
         if self.ledger_block is not None:
             return self.ledger_block[self.block_row]
         return model.ledger(self.x, self.v, self.closed, self.dissipated_viscous,
-                            self.dissipated_hysteresis)
+                            self.dissipated_hysteresis, self.external_work, self.time)
 
 
 class LedgerBlock:
     """The energy ledgers of a block of ``F`` frames, computed together
     (:meth:`~mdgran.chain.ChainModel.ledger_rows`: bitwise each frame's own ledger) when the
     first is read: ``block[k]`` is frame ``k``'s ledger dict.  Built from the frames' states,
-    ``x``, ``v`` [F, n], ``closed`` [F, n_contacts], the dissipated energies [F], which
-    must not change after."""
+    ``x``, ``v`` [F, n], ``closed`` [F, n_contacts], the dissipated energies [F] (then,
+    optionally, the external work and the times [F]), which must not change after."""
 
     __slots__ = ("_model", "_states", "_rows")
 
-    def __init__(self, model, x, v, closed, dissipated_viscous, dissipated_hysteresis):
+    def __init__(self, model, x, v, closed, dissipated_viscous, dissipated_hysteresis,
+                 external_work=None, t=None):
         self._model = model
-        self._states = (x, v, closed, dissipated_viscous, dissipated_hysteresis)
+        self._states = (x, v, closed, dissipated_viscous, dissipated_hysteresis,
+                        external_work, t)
         self._rows = None
 
     def __getitem__(self, k: int) -> dict:
@@ -114,11 +117,15 @@ def scene_features(scene, model) -> list:
         out.append(("thermal", "thermal.temperature", "initial random velocities"))
     if model.substrate_damping:
         out.append(("substrate damping", "substrate.damping", "substrate damping"))
+    if model.drive is not None and model.drive.pulse is not None:
+        out.append(("pulse", "pulse.amplitude", "a force pulse"))
+    if model.drive is not None and model.drive.base is not None:
+        out.append(("base", "base.kind", "a base motion"))
     return out
 
 
 #: every feature of :func:`scene_features`
-ALL_FEATURES = frozenset({"mixture", "thermal", "substrate damping"})
+ALL_FEATURES = frozenset({"mixture", "thermal", "substrate damping", "pulse", "base"})
 
 
 class Backend:

@@ -146,13 +146,15 @@ class FastBackend(Backend):
             mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
             law=schwarz_constants(law), table=table,
             mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max, exact),
-            sub_damping=float(m.substrate_damping))
+            sub_damping=float(m.substrate_damping), drive=fk.drive_record(m.drive))
         self.flags = fk.Flags(walls=m.walls, damped=m.damping != 0.0, k1_on=m.k1 != 0.0,
                               k3_on=m.k3 != 0.0, locate=self.locate,
                               exact=exact, hertz=law.kind == "hertz",
                               mixed=m.mixture is not None, sub_damped=m.substrate_damping != 0.0,
                               off_substrate=m.mixture is not None and m.mixture.free_beads,
-                              threaded=self.threads > 1 and m.n_contacts > fk.SEGMENT)
+                              threaded=self.threads > 1 and m.n_contacts > fk.SEGMENT,
+                              pulse=m.drive is not None and m.drive.pulse is not None,
+                              base=m.drive is not None and m.drive.base is not None)
         self.advance = fk.get_kernel(self.flags)
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
@@ -265,9 +267,13 @@ class FastBackend(Backend):
     def checkpoint_state(self) -> dict:
         """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
-        so a resumed run is bitwise identical), ``closed``, ``d_hyst``, ``i_out``."""
+        so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
+        ``closed``, ``d_hyst``, ``i_out``."""
         frame, a, sums, k = self._last  # a, sums: the rows of the frame's block
-        y = np.concatenate([frame.x, frame.v, a[k], [frame.dissipated_viscous, sums[k, 2]]])
+        ledger = [frame.dissipated_viscous, sums[k, 2]]
+        if self.model.drive is not None:
+            ledger += [sums[k, 3], sums[k, 4]]
+        y = np.concatenate([frame.x, frame.v, a[k], ledger])
         return {"t": float(self._out_times[frame.step]), "y": y,
                 "closed": frame.closed.copy(), "d_hyst": frame.dissipated_hysteresis,
                 "i_out": int(frame.step)}
@@ -279,7 +285,8 @@ class FastBackend(Backend):
         self._check_finite(x[None], v[None], [t])
         return Frame(step=int(i_out), time=float(t), x=x, v=v, closed=self.closed.copy(),
                      dissipated_viscous=self._count["d_viscous"].item(),
-                     dissipated_hysteresis=self._count["d_hysteresis"].item(), events=events)
+                     dissipated_hysteresis=self._count["d_hysteresis"].item(), events=events,
+                     external_work=float(self.counters["work"]))
 
     @staticmethod
     def _check_finite(x, v, times):
@@ -310,14 +317,16 @@ class FastBackend(Backend):
             self._check()
             i_out = 0
             frame = self._frame(0, 0.0, self._take_events())
-            power = self._count["power"].item()  # as a block's row: a [1, n], sums [1, 3]
-            self._last = (frame, now.a.copy()[None], np.array([[0.0, 0.0, power]]), 0)
+            power = self._count["power"].item()  # as a block's row: a [1, n], sums [1, 5]
+            self._last = (frame, now.a.copy()[None], np.array([[0.0, 0.0, power, 0.0, 0.0]]), 0)
             yield frame
         else:
             y = np.asarray(resume["y"], dtype=float)
             now = self._current()
             now.x[:], now.v[:], now.a[:] = y[:n], y[n:2 * n], y[2 * n:3 * n]
             cnt["d_viscous"], cnt["power"] = y[3 * n], y[3 * n + 1]
+            if len(y) > 3 * n + 2:  # with excitations
+                cnt["work"], cnt["ext_power"] = y[3 * n + 2], y[3 * n + 3]
             cnt["d_hysteresis"] = float(resume["d_hyst"])
             self.closed[:] = np.asarray(resume["closed"], dtype=bool)
             i_out = int(resume["i_out"])
@@ -333,10 +342,12 @@ class FastBackend(Backend):
         first, :class:`~mdgran.backends.base.LedgerBlock`), each with its events (the pending
         ones first); and the log's count of events up to the last of them."""
         xs, vs, states = block.x[:done], block.v[:done], block.closed[:done]
-        sums = block.sums[:done]  # (D_viscous, D_hysteresis, power) at each frame
-        ledgers = LedgerBlock(self.model, xs, vs, states, sums[:, 0], sums[:, 1])
-        frames = [Frame(i + k, t, x, v, closed, d_visc, d_hyst, [], ledgers, k)
-                  for k, (x, v, closed, (d_visc, d_hyst, _), t)
+        sums = block.sums[:done]  # (D_viscous, D_hysteresis, power, W, P_ext) at each frame
+        driven = self.model.drive is not None
+        ledgers = LedgerBlock(self.model, xs, vs, states, sums[:, 0], sums[:, 1],
+                              sums[:, 3] if driven else None, np.array(times) if driven else None)
+        frames = [Frame(i + k, t, x, v, closed, d_visc, d_hyst, [], ledgers, k, work)
+                  for k, (x, v, closed, (d_visc, d_hyst, _, work, _), t)
                   in enumerate(zip(xs, vs, states, sums.tolist(), times))]
         ends = block.counts[:done, 0]  # the log's count of events at each frame
         starts = np.concatenate(([0], ends[:-1]))

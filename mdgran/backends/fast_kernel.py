@@ -119,6 +119,8 @@ class Flags(NamedTuple):
     sub_damped: bool = False  # substrate damping force -c_s v on the beads
     off_substrate: bool = False  # (mixed) some bead is off the substrate: Mix.on_site is read
     threaded: bool = False  # the segments of a pass run on several threads (same results)
+    pulse: bool = False  # a force pulse on one bead (:class:`Drive`)
+    base: bool = False  # a base motion under the substrate (:class:`Drive`)
 
 
 class ForceTable(NamedTuple):
@@ -164,6 +166,38 @@ def no_mix() -> Mix:
                np.zeros((0, 0, 4)), e, e, e)
 
 
+class Drive(NamedTuple):
+    """The excitations of :mod:`mdgran.drive` (flags.pulse, flags.base): the half-sine pulse
+    ``amp sin(pi (t - start) / duration)`` on bead ``bead``; the base motion's cubics
+    ``coef[k]`` (highest power first, in ``t - k step``; the last row after the samples)."""
+
+    bead: int
+    amp: float
+    duration: float
+    start: float
+    step: float
+    coef: np.ndarray  # [intervals + 1, 4]
+
+
+def no_drive() -> Drive:
+    """The :class:`Drive` of a scene without excitations (never read)."""
+    return Drive(0, 0.0, 1.0, 0.0, 1.0, np.zeros((1, 4)))
+
+
+def drive_record(drive) -> Drive:
+    """The kernel's :class:`Drive` of a :class:`mdgran.drive.Drive` (or None)."""
+    if drive is None:
+        return no_drive()
+    p, b = drive.pulse, drive.base
+    out = no_drive()
+    if p is not None:
+        out = out._replace(bead=int(p.bead), amp=float(p.amplitude),
+                           duration=float(p.duration), start=float(p.start))
+    if b is not None:
+        out = out._replace(step=float(b.step), coef=np.ascontiguousarray(b.coef, dtype=float))
+    return out
+
+
 class Params(NamedTuple):
     """The constants of one run (units of :mod:`mdgran.chain`)."""
 
@@ -177,7 +211,8 @@ class Params(NamedTuple):
     law: SchwarzConstants
     table: ForceTable
     mix: Mix  # unlike beads (flags.mixed); no_mix() otherwise
-    sub_damping: float = 0.0  # c_s (flags.sub_damped)
+    sub_damping: float  # c_s (flags.sub_damped)
+    drive: Drive  # force pulse and base motion (flags.pulse, flags.base); no_drive() otherwise
 
 
 class Beads(NamedTuple):
@@ -235,21 +270,22 @@ class KernelState(NamedTuple):
 
 class FrameBlock(NamedTuple):
     """The states at the ends of consecutive frames, written by the loop (:func:`get_kernel`):
-    row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P)``,
+    row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P, W,
+    P_ext)`` (the excitations' work and its rate),
     ``counts[k]`` = ``(counters.events, counters.substeps)`` at that frame."""
 
     x: np.ndarray  # [K, n]
     v: np.ndarray  # [K, n]
     a: np.ndarray  # [K, n]
     closed: np.ndarray  # [K, m] bool
-    sums: np.ndarray  # [K, 3]
+    sums: np.ndarray  # [K, 5]
     counts: np.ndarray  # [K, 2] int64
 
 
 def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
     """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
     return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
-                      np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 3)),
+                      np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 5)),
                       np.empty((frames, 2), dtype=np.int64))
 
 
@@ -268,6 +304,8 @@ COUNTERS = np.dtype([
     ("power", np.float64),  # damping power at the current state
     ("bad_time", np.float64),  # the time an error concerns
     ("chatter_time", np.float64),  # the instant KernelState.chatter counts switches at
+    ("work", np.float64),  # W, the excitations' work (mdgran.drive)
+    ("ext_power", np.float64),  # its rate at the current state
 ])
 
 
@@ -460,12 +498,58 @@ def quantized_switch(flags, params, j, d, doff, x_old, h, t0, closed):
     return np.int64(j), t0 + frac * h, loss
 
 
+@njit(inline="always")
+def drive_at(flags, params, t):
+    """``(u_b, u_b', F)`` at time t: the base's displacement and velocity, the pulse's force
+    (each 0 when the variant has none; :mod:`mdgran.drive`)."""
+    ub, vb, fp = 0.0, 0.0, 0.0
+    d = params.drive
+    if flags.pulse:
+        s = (t - d.start) / d.duration
+        if 0.0 <= s <= 1.0:
+            fp = d.amp * math.sin(math.pi * s)
+    if flags.base:
+        k = min(math.floor(max(t, 0.0) / d.step), d.coef.shape[0] - 1)
+        u = t - k * d.step
+        c = d.coef[np.uint64(k)]
+        ub = ((c[0] * u + c[1]) * u + c[2]) * u + c[3]
+        vb = (3.0 * c[0] * u + 2.0 * c[1]) * u + c[2]
+    return ub, vb, fp
+
+
+@njit(cache=True)
+def external_power(flags, params, beads, t):
+    """Rate of the excitations' work at time t in state ``beads``: ``F(t) v_b + u_b'(t)
+    sum_i F_sub,i`` (:mod:`mdgran.drive`)."""
+    ub, vb, fp = drive_at(flags, params, t)
+    p = 0.0
+    if flags.pulse:
+        p += fp * beads.v[params.drive.bead]
+    if flags.base:
+        total = 0.0
+        for i in range(beads.x.shape[0]):
+            y = beads.x[i] - ub
+            f = -(params.k1 * y + params.k3 * y * y * y
+                  + params.sub_damping * (beads.v[i] - vb))
+            total += params.mix.on_site[i] * f if flags.off_substrate else f
+        p += vb * total
+    return p
+
+
 @njit(cache=True, inline="always")
-def bead_accelerations(f, fv, x, ve, i, flags, params):
+def bead_accelerations(f, fv, x, ve, i, flags, params, now):
     """Bead i's acceleration from its net contact force ``f`` (and ``fv``, the same with the
     mean-force kick near snap-off) plus the substrate terms the scene switches on (unlike
     beads: the substrate times ``on_site[i]``, all over the bead's mass); ``ve`` the bead's
-    velocity estimate at the step's end, for the substrate damping ``-c_s v``."""
+    velocity estimate at the step's end, for the substrate damping ``-c_s v``.  ``now`` =
+    :func:`drive_at` at the step's end: the substrate acts on ``x - u_b`` and ``ve - u_b'``,
+    the pulse pushes its bead."""
+    if flags.pulse and i == params.drive.bead:
+        f += now[2]
+        fv += now[2]
+    if flags.base:
+        x = x - now[0]
+        ve = ve - now[1]
     if flags.sub_damped:
         fd = params.sub_damping * ve
         if flags.off_substrate:
@@ -532,6 +616,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """
     h, t0, size, flag, ev_real, ev_contact = seg
     walls, hertz = flags.walls, flags.hertz
+    now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
     # unsigned indices: numba emits no negative-index wraparound code for them
     n = np.uint64(xo.shape[0])
@@ -607,18 +692,18 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             f_first, fv_first = f_r, fv_r
         if rb >= one and (j > j0 or s == 0):  # finish the left bead
             a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, rb - one, flags,
-                                       params)
+                                       params, now)
             if flags.sub_damped:
-                power += substrate_power(ve_c, rb - one, flags, params)
+                power += substrate_power(ve_c - now[1], rb - one, flags, params)
             xn[rb - one] = x_c
             an[rb - one] = a
             vn[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
-        a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params)
+        a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params, now)
         if flags.sub_damped:
-            power += substrate_power(ve_c, n - one, flags, params)
+            power += substrate_power(ve_c - now[1], n - one, flags, params)
         xn[n - one] = x_c
         an[n - one] = a
         vn[n - one] = vh_c + hh * av
@@ -626,10 +711,11 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
 
 
 @njit(cache=True)
-def finish_edge(flags, params, old, new, h, seg, s):
+def finish_edge(flags, params, old, new, h, t1, seg, s):
     """Finish the bead left of segment s's first contact (s >= 1), between the last contact
     of segment s - 1 and the first of s, as :func:`segment_pass` finishes every other bead
-    (the same operations); returns its substrate damping power."""
+    (the same operations; the step ends at t1); returns its substrate damping power."""
+    now = drive_at(flags, params, t1)
     b = s * seg.size - (1 if flags.walls else 0)
     hh = 0.5 * h
     a_b = old.a[b]
@@ -639,11 +725,11 @@ def finish_edge(flags, params, old, new, h, seg, s):
     real = seg.real
     a, av = bead_accelerations(real[s - 1, R_LAST] - real[s, R_FIRST],
                                real[s - 1, R_LAST_KICK] - real[s, R_FIRST_KICK], x, ve, b,
-                               flags, params)
+                               flags, params, now)
     new.x[b] = x
     new.a[b] = a
     new.v[b] = vh + hh * av
-    return substrate_power(ve, b, flags, params) if flags.sub_damped else 0.0
+    return substrate_power(ve - now[1], b, flags, params) if flags.sub_damped else 0.0
 
 
 @njit(cache=True)
@@ -669,7 +755,7 @@ def gather_flags(seg, s, total):
 
 
 @njit(inline="always")
-def merge_segments(flags, params, old, new, h, ks):
+def merge_segments(flags, params, old, new, h, t1, ks):
     """After every segment of a pass (:func:`segment_pass`): finish the beads at their
     edges, then in segment order add up the damping power, log the step-quantized switches
     (and their hysteresis losses), gather the flagged contacts into ``ks.flagged`` and
@@ -681,7 +767,7 @@ def merge_segments(flags, params, old, new, h, ks):
     total = 0
     for s in range(seg.count):
         if s > 0:
-            power += finish_edge(flags, params, old, new, h, seg, s)
+            power += finish_edge(flags, params, old, new, h, t1, seg, s)
             if total < FLAG_CAP:
                 gather_flags(seg, s, total)
         power += real[s, R_POWER]
@@ -880,7 +966,8 @@ def settle_all(flags, params, t, beads, ks):
 
 @njit(cache=True)
 def init_acc(flags, params, beads, ks):
-    """a = a(x, v) for the current contact states; returns the damping power."""
+    """a = a(x, v) at t = 0 for the current contact states; returns the damping power.  The
+    excitations vanish at t = 0 (a pulse starts at 0 force, a base at rest at 0)."""
     x, v, a = beads
     closed = ks.closed
     n = x.shape[0]
@@ -973,6 +1060,10 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
                 counters.d_viscous += 0.5 * h * (counters.power + p1)
                 counters.power = p1
                 counters.current = w
+                if flags.pulse or flags.base:  # the excitations' work, by the same rule
+                    pe = external_power(flags, params, new, t0 + done + h)
+                    counters.work += 0.5 * h * (counters.ext_power + pe)
+                    counters.ext_power = pe
             if ns == 0:
                 break
             if redo == 0 and not last and te > 0.0:
@@ -1016,6 +1107,8 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         block.sums[k, 0] = counters.d_viscous
         block.sums[k, 1] = counters.d_hysteresis
         block.sums[k, 2] = counters.power
+        block.sums[k, 3] = counters.work
+        block.sums[k, 4] = counters.ext_power
         block.counts[k, 0] = counters.events
         block.counts[k, 1] = counters.substeps
     return nframes
@@ -1037,7 +1130,7 @@ def plain(record):
 def named_params(p):
     """:class:`Params` from ``plain(params)``."""
     return Params(p[0], p[1], p[2], p[3], p[4], p[5], p[6], SchwarzConstants(*p[7]),
-                  ForceTable(*p[8]), Mix(*p[9]), p[10])
+                  ForceTable(*p[8]), Mix(*p[9]), p[10], Drive(*p[11]))
 
 
 @njit(inline="always")
@@ -1084,10 +1177,11 @@ def _make_advance(flags):
         :func:`merge_segments`; returns the damping power at the step's end.  numba's
         parallel loop takes arrays and numbers from outside, not records: they are taken
         apart before it and put together again in it."""
-        gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s = params
+        gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s, drive = params
         l0, l1, l2, l3, l4 = law
         t_coef, t_base, t_scale, t_last, t_step = table
         m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12 = mix
+        d0, d1, d2, d3, d4, d5 = drive
         xo, vo, ao = old
         xn, vn, an = new
         closed = ks.closed
@@ -1096,10 +1190,11 @@ def _make_advance(flags):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
                        ForceTable(t_coef, t_base, t_scale, t_last, t_step),
-                       Mix(m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12), c_s)
+                       Mix(m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12), c_s,
+                       Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
                         (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
-        return merge_segments(flags, params, old, new, h, ks)
+        return merge_segments(flags, params, old, new, h, t0 + h, ks)
 
     @njit(cache=True)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):

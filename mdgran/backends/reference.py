@@ -3,7 +3,9 @@
 Between contact events the equations of motion are smooth and are integrated with SciPy's
 DOP853 (explicit Runge-Kutta of order 8, dense output of order 7) at ``rtol = atol =
 run.tolerance``.  The state vector is ``[x (n), v (n), D_viscous]``: the viscous dissipation is
-integrated with the motion, so the energy ledger closes to the integrator's accuracy.
+integrated with the motion, so the energy ledger closes to the integrator's accuracy.  A scene
+with a force pulse or a base motion (:mod:`mdgran.drive`) adds their work ``W`` as a last
+component, ``[x, v, D_viscous, W]``, integrated the same way.
 
 **Events.**  Every contact has an event function that is positive inside its current state::
 
@@ -158,16 +160,20 @@ class ReferenceBackend(Backend):
         n = self.n
         any_closed = bool(closed.any())
 
+        driven = m.drive is not None
+
         def rhs(t, y):
             x = y[:n]
             v = y[n:2 * n]
             out = np.empty_like(y)
             out[:n] = v
             if any_closed:
-                out[n:2 * n] = m.acceleration(x, v, closed)
+                out[n:2 * n] = m.acceleration(x, v, closed, t)
             else:
-                out[n:2 * n] = m.free_acceleration(x, v)
-            out[2 * n] = m.viscous_power(v, closed)
+                out[n:2 * n] = m.free_acceleration(x, v, t)
+            out[2 * n] = m.viscous_power(v, closed, t)
+            if driven:
+                out[2 * n + 1] = m.external_power(x, v, t)
             return out
 
         return rhs
@@ -334,7 +340,8 @@ class ReferenceBackend(Backend):
         x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
         self._closed = closed
         self._d_hyst = 0.0
-        s = _Loop(t=0.0, y=np.concatenate([x, v, [0.0]]))
+        ledger = [0.0, 0.0] if self.model.drive is not None else [0.0]  # D_viscous (, W)
+        s = _Loop(t=0.0, y=np.concatenate([x, v, ledger]))
         self._settle(s.t, s.y, s.events)
         s.armed_out = self._g(s.y, self._closed)[0] <= 0.0
         return s
@@ -524,4 +531,5 @@ class ReferenceBackend(Backend):
         n = self.n
         return Frame(step=step, time=float(t), x=np.array(y[:n]), v=np.array(y[n:2 * n]),
                      closed=self._closed.copy(), dissipated_viscous=float(y[2 * n]),
-                     dissipated_hysteresis=self._d_hyst, events=list(events))
+                     dissipated_hysteresis=self._d_hyst, events=list(events),
+                     external_work=float(y[2 * n + 1]) if len(y) > 2 * n + 1 else 0.0)

@@ -1,0 +1,202 @@
+"""Imposed excitations (issue 17, mdgran.drive): a half-sine force pulse and a base motion
+under the substrate, on the reference and fast backends, against analytic motions, the
+momentum a pulse gives, and the energy ledger with the excitations' work.
+
+The fast backend's tests use two kernel variants (free chain with a substrate, pulse and base;
+fixed chain with every term), each compiled once."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from mdgran import run
+from mdgran.drive import base_from_acceleration, base_from_displacement
+from mdgran.scene import SceneError, load_scene
+
+from conftest import make_scene
+
+K1 = 0.04  # omega = 0.2: a period of 31.4 time units
+PULSE = {"amplitude": 0.3, "duration": 3.0, "start": 2.0, "bead": 2}
+A_BASE, T_BASE = 0.01, 5.0  # the base accelerates at A_BASE for T_BASE, then coasts
+
+
+def oscillator_after_pulse(t, w, amp, dur, start):
+    """``y'' = -w^2 y + F(t)``, ``F = amp sin(pi (t - start) / dur)`` on [start, start +
+    dur], from rest at 0 (Duhamel's integral in closed form)."""
+    om = math.pi / dur
+    c = amp / (w * w - om * om)
+    tau = np.clip(t - start, 0.0, dur)
+    y = c * (np.sin(om * tau) - om / w * np.sin(w * tau))
+    v = c * om * (np.cos(om * tau) - np.cos(w * tau))
+    late = t - start - dur
+    return np.where(late > 0.0, y * np.cos(w * np.maximum(late, 0.0))
+                    + v / w * np.sin(w * np.maximum(late, 0.0)), y)
+
+
+def oscillator_on_accelerating_base(t, w, a0, tb):
+    """``x'' = -w^2 (x - u_b)`` with ``u_b = a0 t^2 / 2`` up to ``tb``, then coasting at
+    ``a0 tb``: ``y = x - u_b`` obeys ``y'' = -w^2 y - u_b''`` from rest at 0."""
+    tau = np.minimum(t, tb)
+    y = -a0 / (w * w) * (1.0 - np.cos(w * tau))
+    v = -a0 / w * np.sin(w * tau)
+    late = np.maximum(t - tb, 0.0)
+    y = np.where(t > tb, y * np.cos(w * late) + v / w * np.sin(w * late), y)
+    ub = np.where(t > tb, a0 * tb * tb / 2 + a0 * tb * (t - tb), a0 * t * t / 2)
+    return ub + y
+
+
+def two_beads(**run_keys):
+    """Two beads 10 p apart (the contact stays open), on a substrate whose base accelerates
+    for T_BASE; bead 2 also gets PULSE."""
+    return make_scene(chain={"n": 2, "boundary": "free", "initial_gap": 10.0},
+                      contact={"damping": 0.0}, substrate={"k1": K1},
+                      impulse={"velocity": 0.0}, pulse=PULSE,
+                      base={"kind": "acceleration", "interval": T_BASE,
+                            "values": [A_BASE, A_BASE]},
+                      run={"duration": 60.0, "output_interval": 0.5, **run_keys})
+
+
+@pytest.mark.parametrize("backend,tol", [("reference", 1e-9), ("fast", 2e-5)])
+def test_pulse_and_base_move_beads_as_driven_oscillators(backend, tol):
+    """Bead 1 rides the accelerating base, bead 2 too and is pushed by the pulse: each follows
+    its analytic motion (superposed for bead 2); the fast backend to its O(dt^2) error."""
+    res = run(two_beads(dt=0.0025, tolerance=1e-12), backend)
+    tr = res.trajectory
+    w = math.sqrt(K1)
+    base = oscillator_on_accelerating_base(tr.time, w, A_BASE, T_BASE)
+    pushed = oscillator_after_pulse(tr.time, w, PULSE["amplitude"], PULSE["duration"],
+                                    PULSE["start"])
+    scale = np.abs(base).max()
+    assert np.abs(tr.x[:, 0] - base).max() < tol * scale
+    assert np.abs(tr.x[:, 1] - (base + pushed)).max() < tol * scale
+    assert len(tr.ev_time) == 0  # the contact never closed
+    assert res.status == "complete" and res.max_ledger_error <= res.ledger_bound
+
+
+def test_pulse_gives_its_impulse_to_a_free_chain():
+    """A free chain without substrate: whatever its contacts do, its momentum after the pulse
+    is ``J = 2 A T / pi`` (reference backend, 1e-9)."""
+    sc = make_scene(chain={"n": 6, "boundary": "free"}, substrate={"k1": 0.0},
+                    impulse={"velocity": 0.0},
+                    pulse={"amplitude": -0.5, "duration": 2.0, "start": 1.0, "bead": 4},
+                    run={"duration": 10.0, "output_interval": 0.5, "tolerance": 1e-11})
+    res = run(sc, "reference")
+    p = res.trajectory.v.sum(axis=1)
+    j = 2 * -0.5 * 2.0 / math.pi
+    assert abs(p[-1] - j) < 1e-9 * abs(j)
+    assert np.all(p[res.trajectory.time <= 1.0] == 0.0)
+    assert len(res.trajectory.ev_time) > 0  # the contacts did switch
+    assert res.status == "complete"
+
+
+def shaken_chain(amplitude, duration, base_amp, seed):
+    """A fixed chain with every term (damping, substrate, its damping) hit by a pulse on a
+    base shaken by a seeded random displacement series."""
+    rng = np.random.default_rng(seed)
+    u = np.concatenate([[0.0], base_amp * rng.uniform(-1.0, 1.0, 20)])
+    return make_scene(chain={"n": 12}, substrate={"damping": 0.02},
+                      impulse={"velocity": 0.0},
+                      pulse={"amplitude": amplitude, "duration": duration, "bead": 3},
+                      base={"kind": "displacement", "interval": 1.5, "values": list(u)},
+                      run={"duration": 40.0, "output_interval": 0.25, "dt": 0.0025,
+                           "tolerance": 1e-9})
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(amplitude=st.floats(-3.0, 3.0).filter(lambda a: abs(a) > 0.05),
+       duration=st.floats(0.2, 5.0), base_amp=st.floats(0.0, 0.5),
+       seed=st.integers(0, 1000))
+def test_driven_ledger_closes_and_backends_agree(amplitude, duration, base_amp, seed):
+    """Kinetic + contact + substrate + dissipated - external work stays at E0 within each
+    backend's bound (the ledger is an independent conservation law: W is integrated apart
+    from the motion), and the fast backend's work and motion follow the reference's up to
+    t = 5, before contact events can set the two runs apart."""
+    sc = shaken_chain(amplitude, duration, base_amp, seed)
+    ref, fast = run(sc, "reference"), run(sc, "fast")
+    for res in (ref, fast):
+        assert res.status == "complete"
+        assert res.max_ledger_error <= res.ledger_bound
+    scale = sc.energy_scale
+    early = ref.trajectory.time <= 5.0
+    w_ref = ref.trajectory.ledger["external_work"]
+    w_fast = fast.trajectory.ledger["external_work"]
+    assert np.abs(w_ref - w_fast)[early].max() < 1e-3 * scale
+    assert np.abs(ref.trajectory.x - fast.trajectory.x)[early].max() < 1e-3
+    assert w_ref[-1] != 0.0
+
+
+@pytest.mark.parametrize("backend", ["reference", "fast"])
+def test_driven_run_resumes_bitwise(tmp_path, interrupt_at, backend):
+    """A driven run interrupted after a checkpoint and resumed writes the file of a run
+    straight through: the work (and, fast, its rate) are in the checkpoint."""
+    sc = shaken_chain(1.0, 2.0, 0.3, 3)
+    whole, parts = tmp_path / "whole.h5", tmp_path / "parts.h5"
+    run(sc, backend, out=whole)
+    with pytest.raises(KeyboardInterrupt):
+        run(sc, backend, out=parts, checkpoint_every=0.0, reporters=[interrupt_at(20.05)])
+    res = run(sc, backend, out=parts, checkpoint_every=0.0, resume=True)
+    assert res.trajectory.time[0] > 20  # it did resume, not restart
+    a, b = _datasets(whole), _datasets(parts)
+    assert a.keys() == b.keys() and "observables/external_work/value" in a
+    for k in a:
+        assert a[k].tobytes() == b[k].tobytes(), k
+
+
+def _datasets(path):
+    import h5py
+
+    out = {}
+    with h5py.File(path) as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
+                     if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def test_base_series_interpolate_their_samples():
+    """The displacement spline passes through its samples with zero end velocities and holds
+    the last value; the acceleration series integrates to the velocity and displacement of
+    its linear pieces (trapezoid and Simpson are exact on them)."""
+    u = [0.0, 0.3, -0.2, 0.5, 0.1]
+    b = base_from_displacement(0.5, u)
+    t = 0.5 * np.arange(len(u))
+    assert np.allclose(b.position(t), u, atol=1e-15)
+    assert b.velocity(0.0) == 0.0 and abs(b.velocity(t[-1])) < 1e-14
+    assert b.position(10.0) == 0.1 and b.velocity(10.0) == 0.0
+    a = np.array([0.0, 1.0, -2.0, 0.5])
+    b = base_from_acceleration(2.0, a)
+    v_end = np.sum(0.5 * (a[1:] + a[:-1]) * 2.0)
+    assert b.velocity(6.0) == pytest.approx(v_end, abs=1e-14)
+    assert b.velocity(9.0) == pytest.approx(v_end, abs=1e-14)  # coasting after the samples
+    fine = np.linspace(0.0, 6.0, 60001)
+    acc = np.interp(fine, [0, 2, 4, 6], a)
+    vel = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * 1e-4)])
+    disp = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * 1e-4)])
+    assert b.position(6.0) == pytest.approx(disp[-1], abs=1e-7)
+
+
+@pytest.mark.parametrize("keys,key", [
+    ({"pulse": {"amplitude": 1.0}}, "pulse.duration"),
+    ({"pulse": {"duration": 1.0}}, "pulse.duration"),
+    ({"pulse": {"amplitude": 1.0, "duration": 1.0, "bead": 21}}, "pulse.bead"),
+    ({"base": {"kind": "displacement", "interval": 1.0}}, "base.values"),
+    ({"base": {"kind": "displacement", "interval": 1.0, "values": [0.1, 0.2]}}, "base.values"),
+    ({"base": {"kind": "acceleration", "interval": 1.0, "values": [1.0]}}, "base.values"),
+    ({"base": {"values": [0.0, 1.0]}}, "base.values"),
+    ({"base": {"kind": "acceleration", "interval": 1.0, "values": [0.0, 1.0]},
+      "substrate": {"k1": 0.0}}, "base.kind"),
+])
+def test_bad_excitations_are_refused_naming_the_key(keys, key):
+    with pytest.raises(SceneError) as exc:
+        load_scene(keys)
+    assert exc.value.key == key
+
+
+@pytest.mark.lammps
+def test_lammps_refuses_a_driven_scene():
+    """Not yet on LAMMPS: refused before running, naming the key."""
+    sc = make_scene(impulse={"velocity": 0.0}, pulse={"amplitude": 1.0, "duration": 1.0})
+    with pytest.raises(SceneError) as exc:
+        run(sc, "lammps")
+    assert exc.value.key == "pulse.amplitude"
