@@ -12,7 +12,11 @@ before anything runs.  ``docs/scenes.md`` explains the rules with a worked SI ex
 other sections a key ending in ``_si`` is SI and needs a ``[material]``; every other key is
 nondimensional (units of physics.md section 1).  A value may be given one way only: ``k1`` or
 ``k1_si``, not both.  The SI keys are ``substrate.k1_si`` (N/m), ``substrate.k3_si``
-(N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s).
+(N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s),
+and per bead (a number or a list of chain.n) ``beads.E`` (Pa), ``beads.nu``, ``beads.w``
+(J/m^2), named as the ``[material]`` keys they repeat, and ``beads.density_si`` (kg/m^3): they
+set the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`_derive_beads`), as the
+nondimensional ``beads.mass`` sets ``beads.density``.
 
 **A material means what it says.**  A ``[material]`` table must be complete: ``diameter`` (m),
 ``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
@@ -909,11 +913,12 @@ def key_reference() -> str:
         "",
         "Every key a scene (TOML file, mapping, or `--set SECTION.KEY=VALUE`) may give. The",
         "rules (SI and nondimensional keys, what a `[material]` derives) are in",
-        "[scenes.md](scenes.md). `[material]` keys and keys ending in `_si` are SI; every other",
-        "key is nondimensional, in the units of physics.md section 1: force `eta = pi R w`,",
-        "length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1; \"-\" is a pure",
-        "number. Values must also be finite; \"range\" is what the checks in `mdgran/scene.py`",
-        "allow (an SI key's converted value must fit its plain key's range).",
+        "[scenes.md](scenes.md). `[material]` keys, keys ending in `_si` and `beads.E`,",
+        "`beads.nu`, `beads.w` (named as the `[material]` keys they give per bead) are SI; every",
+        "other key is nondimensional, in the units of physics.md section 1: force",
+        "`eta = pi R w`, length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1;",
+        "\"-\" is a pure number. Values must also be finite; \"range\" is what the checks in",
+        "`mdgran/scene.py` allow (an SI key's converted value must fit its plain key's range).",
         "",
     ]
     for sec, keys in SCHEMA.items():
