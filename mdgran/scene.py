@@ -712,8 +712,9 @@ BEAD_WAYS = {"E": "modulus", "nu": "modulus", "w": "adhesion", "density_si": "de
 
 def _derive_beads(data: dict, raw: dict, scales, sources: dict):
     """``beads.E``/``nu``, ``w``, ``density_si`` (SI, need a [material]) and ``mass`` become
-    the ratios ``beads.modulus``, ``adhesion``, ``density`` (:mod:`mdgran.mixture`'s
-    ``*_ratios``); the resolved scene holds the ratios only, as for the other SI keys."""
+    the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`mdgran.mixture.
+    modulus_ratios`, ``ratios_to``, ``density_from_mass``); the resolved scene holds the ratios
+    only, as for the other SI keys.  A striker keeps its own ``striker.density``."""
     b, n = data["beads"], data["chain"]["n"]
     given = [name for name in BEAD_WAYS if b[name] is not None]
     for name in BEAD_WAYS:
