@@ -231,6 +231,48 @@ def mixture_from_ratios(law: ContactLaw, walls: bool, diameter, density=1.0, mod
     return Mixture(law, r * s**3, per_bead(substrate), fc, A, L, dict(info or {}))
 
 
+# ---- per-bead SI values to ratios (scene keys beads.E, nu, w, density_si, mass) ------------
+def _each(f, *values):
+    """``f`` of each bead's values: a float if every value is a number, else a list (the lists
+    have one length, chain.n; a number stands for every bead)."""
+    n = max((len(v) for v in values if isinstance(v, list)), default=0)
+    if not n:
+        return float(f(*values))
+    return [float(f(*(v[i] if isinstance(v, list) else v for v in values))) for i in range(n)]
+
+
+def modulus_ratios(E, nu, K0: float, convention: str = "table"):
+    """Contact-modulus ratios ``k_i = K_ii / K0`` of beads of Young's modulus ``E`` (Pa) and
+    Poisson's ratio ``nu`` (each a number or a list of n), ``K_ii`` the ``K`` of two beads of
+    bead ``i``'s material by ``convention`` (:func:`mdgran.units.contact_modulus`), ``K0`` (Pa)
+    the reference pair's.
+
+    Both conventions are ``K = c E*`` with the Hertz effective modulus of the pair,
+    ``1/E* = (1 - nu_i^2)/E_i + (1 - nu_j^2)/E_j`` (``c = 1`` "table", ``4/3`` "text"), so
+    ``E*_ii = E_i / (2 (1 - nu_i^2))`` and ``1/E*_ij = (1/E*_ii + 1/E*_jj) / 2``: the pair's
+    true ``K_ij`` is the harmonic mean of ``K_ii`` and ``K_jj``, the rule of
+    :func:`pair_ratios`."""
+    from .units import contact_modulus
+
+    return _each(lambda e, v: contact_modulus(float(e), float(v), convention) / K0, E, nu)
+
+
+def ratios_to(values, reference: float):
+    """``values / reference`` (a number or a list; e.g. ``w_i / w0`` from ``w_i`` in J/m^2,
+    ``rho_i / rho0`` from kg/m^3)."""
+    return _each(lambda v: float(v) / reference, values)
+
+
+def density_from_mass(mass, diameter):
+    """Density ratios ``rho_i / rho0 = m_i / s_i^3`` from mass ratios ``m_i / m0`` (a number or
+    a list of n) and diameter ratios ``s_i`` [n] (:func:`pattern_diameters`), as
+    ``m_i = rho_i s_i^3`` in the reference bead's units; a number where every bead has it."""
+    s = [float(x) for x in np.asarray(diameter, dtype=float)]
+    if not isinstance(mass, list) and len(set(s)) == 1:
+        return float(mass) / s[0] ** 3
+    return _each(lambda m, d: float(m) / d**3, mass, s)
+
+
 # ---- from a scene ([beads], [striker]) -------------------------------------------------------
 def pattern_diameters(beads: dict, n: int) -> np.ndarray:
     """Diameter ratios ``d_i / d0`` [n] of a scene's ``[beads]`` table (``beads.pattern``):

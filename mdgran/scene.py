@@ -12,7 +12,11 @@ before anything runs.  ``docs/scenes.md`` explains the rules with a worked SI ex
 other sections a key ending in ``_si`` is SI and needs a ``[material]``; every other key is
 nondimensional (units of physics.md section 1).  A value may be given one way only: ``k1`` or
 ``k1_si``, not both.  The SI keys are ``substrate.k1_si`` (N/m), ``substrate.k3_si``
-(N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s).
+(N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s),
+and per bead (a number or a list of chain.n) ``beads.E`` (Pa), ``beads.nu``, ``beads.w``
+(J/m^2), named as the ``[material]`` keys they repeat, and ``beads.density_si`` (kg/m^3): they
+set the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`_derive_beads`), as the
+nondimensional ``beads.mass`` sets ``beads.density``.
 
 **A material means what it says.**  A ``[material]`` table must be complete: ``diameter`` (m),
 ``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
@@ -94,6 +98,9 @@ LIMITS = {
     "thermal.temperature": (0.0, 1e6),
     "pulse.amplitude": (-1e4, 1e4),
     "base.values": (-1e6, 1e6),
+    "beads.E": (1e3, 1e13),
+    "beads.w": (1e-6, 1e3),
+    "beads.density_si": (1.0, 1e5),
 }
 
 class Key(NamedTuple):
@@ -118,6 +125,7 @@ PATTERNS = ("uniform", "dimer", "tapered", "intruder", "random")
 #: base.kind values (mdgran.drive)
 BASE_KINDS = ("none", "displacement", "acceleration")
 _MAT = "required in a [material]"
+_SI_LIST = "a number or a list of chain.n numbers"
 
 #: section -> key -> :class:`Key`.  The one source of the keys, their defaults, ranges and units
 #: (``docs/scene_keys.md`` is generated from it).
@@ -256,6 +264,22 @@ SCHEMA = {
         "pair_adhesion": Key(None, "ratio?", f"a number in {_RATIO}", "w0",
                              "one work of adhesion for every pair, instead of the means of "
                              "beads.adhesion", "from beads.adhesion"),
+        "E": Key(None, "list:float>0?", f"{_SI_LIST} in [1e3, 1e13] (Pa; needs [material])",
+                 "Pa", "Young's modulus of each bead's material, instead of beads.modulus: "
+                 "sets it to K_ii / K0 (K of two beads of that material by material.modulus, "
+                 "with beads.nu, else material.nu; needs material.E)", "not set"),
+        "nu": Key(None, "list:nu?", f"{_SI_LIST} in [0, 0.5) (needs [material])", "-",
+                  "Poisson's ratio of each bead's material, instead of beads.modulus: sets it "
+                  "with beads.E, else material.E", "not set"),
+        "w": Key(None, "list:float>0?", f"{_SI_LIST} in [1e-6, 1e3] (J/m^2; needs "
+                 "[material])", "J/m^2", "work of adhesion of two of each bead's surfaces, "
+                 "instead of beads.adhesion: sets it to w_i / material.w", "not set"),
+        "density_si": Key(None, "list:float>0?", f"{_SI_LIST} in [1, 1e5] (kg/m^3; needs "
+                          "[material])", "kg/m^3", "density of each bead, instead of "
+                          "beads.density: sets it to rho_i / material.density", "not set"),
+        "mass": Key(None, "list:float>0?", f"{_SI_LIST} > 0", "m0", "mass of each bead over "
+                    "the reference bead's, instead of beads.density: sets it to "
+                    "mass_i / diameter_i^3", "not set"),
     },
     "striker": {
         "diameter": Key(None, "ratio?", f"a number in {_RATIO}", "d0",
@@ -312,6 +336,10 @@ OTHER_WAYS = {
     "contact.fc": ("lambda", "fc_rule"), "contact.lambda": ("fc",),
     "contact.fc_rule": ("fc",),
     "material.K": ("E", "modulus"), "material.E": ("K",), "material.modulus": ("K",),
+    "beads.modulus": ("E", "nu"), "beads.E": ("modulus",), "beads.nu": ("modulus",),
+    "beads.adhesion": ("w",), "beads.w": ("adhesion",),
+    "beads.density": ("density_si", "mass"), "beads.density_si": ("density", "mass"),
+    "beads.mass": ("density", "density_si"),
 }
 
 
@@ -328,6 +356,12 @@ def _check_value(key: str, value, kind, allowed: str):
         if not isinstance(value, str):
             raise SceneError(key, f"must be {allowed}")
         return value
+    if kind.startswith("list:"):  # a number or a list of them, each of kind "list:KIND"
+        if not isinstance(value, list):
+            return _check_value(key, value, kind[5:], allowed)
+        if not value:
+            raise SceneError(key, f"must be {allowed}, not an empty list")
+        return [_check_value(key, v, kind[5:].rstrip("?"), allowed) for v in value]
     if kind == "bool":
         if not isinstance(value, bool):
             raise SceneError(key, f"must be {allowed}, not {value!r}")
@@ -595,6 +629,7 @@ def _resolve(raw: dict):
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
     _check_beads(data, raw)
+    _derive_beads(data, raw, scales, sources)
     _check_drive(data)
     if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
         raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
@@ -761,6 +796,81 @@ def _derive_si(data: dict, raw: dict, scales, sources: dict):
         sources[f"{tsec}.{tname}"] = f"{sec}.{name}"
 
 
+#: beads.* key given in SI (or as masses) -> the ratio key it sets (a value is given one way)
+BEAD_WAYS = {"E": "modulus", "nu": "modulus", "w": "adhesion", "density_si": "density",
+             "mass": "density"}
+
+
+def _derive_beads(data: dict, raw: dict, scales, sources: dict):
+    """``beads.E``/``nu``, ``w``, ``density_si`` (SI, need a [material]) and ``mass`` become
+    the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`mdgran.mixture.
+    modulus_ratios`, ``ratios_to``, ``density_from_mass``); the resolved scene holds the ratios
+    only, as for the other SI keys.  A striker keeps its own ``striker.density``."""
+    b, n = data["beads"], data["chain"]["n"]
+    given = [name for name in BEAD_WAYS if b[name] is not None]
+    for name in BEAD_WAYS:
+        sources[f"beads.{name}"] = None  # consumed (or absent): data holds the ratio
+    for name in given:
+        _check_bead_way(data, raw, scales, name)
+    if not given:
+        return
+    from .mixture import density_from_mass, modulus_ratios, pattern_diameters, ratios_to
+
+    mat = data["material"]
+    if "E" in given or "nu" in given:
+        key = "beads.E" if "E" in given else "beads.nu"
+        E = mat["E"] if b["E"] is None else b["E"]
+        nu = mat["nu"] if b["nu"] is None else b["nu"]
+        _set_ratios(data, sources, "modulus", key,
+                    modulus_ratios(E, nu, scales.K, mat["modulus"]))
+    if "w" in given:
+        _set_ratios(data, sources, "adhesion", "beads.w", ratios_to(b["w"], scales.w))
+    if "density_si" in given:
+        _set_ratios(data, sources, "density", "beads.density_si",
+                    ratios_to(b["density_si"], scales.density))
+    if "mass" in given:
+        _set_ratios(data, sources, "density", "beads.mass",
+                    density_from_mass(b["mass"], pattern_diameters(b, n)))
+    for name in given:
+        b[name] = None  # consumed: the resolved scene holds the ratios
+
+
+def _check_bead_way(data: dict, raw: dict, scales, name: str):
+    """``beads.<name>`` (a key of :data:`BEAD_WAYS`) is given one way only, as a list of
+    chain.n values, with the [material] it needs."""
+    key, ratio, n = f"beads.{name}", BEAD_WAYS[name], data["chain"]["n"]
+    given, value = raw.get("beads", {}), data["beads"][name]
+    if isinstance(value, list) and len(value) != n:
+        raise SceneError(key, f"a list must give chain.n = {n} values, not {len(value)}")
+    others = [f"beads.{k}" for k in ("density_si", "mass") if k in given and k != name]
+    if ratio in given or (ratio == "density" and others):
+        other = f"beads.{ratio}" if ratio in given else others[0]
+        raise SceneError(key, f"give {other} or {key}, not both")
+    if name == "mass":
+        return
+    if scales is None:
+        raise SceneError(key, "needs a [material] table with a diameter")
+    if ratio == "modulus" and data["material"]["E"] is None:
+        raise SceneError(key, "sets K from E and nu by material.modulus; with material.K "
+                         "given, give material.E instead, or beads.modulus")
+    if name == "w" and data["beads"]["pair_adhesion"] is not None:
+        raise SceneError(key, "has no effect with beads.pair_adhesion (one w for every pair); "
+                         "leave one out")
+
+
+def _set_ratios(data: dict, sources: dict, target: str, key: str, values):
+    """Set ``beads.<target>`` to ``values`` (a number or a list, converted from ``key``) if
+    every one is a ratio in [1e-3, 1e3]; else name ``key`` and the first bead out of range."""
+    many = isinstance(values, list)
+    for i, v in enumerate(values if many else [values]):
+        if not (math.isfinite(v) and 1e-3 <= v <= 1e3):
+            where = f"bead {i + 1} " if many else ""
+            raise SceneError(key, f"{where}gives beads.{target} = {v:.6g} (over the "
+                             f"reference bead's), which must be in {_RATIO}")
+    data["beads"][target] = values
+    sources[f"beads.{target}"] = key
+
+
 def load_scene(spec, overrides=(), name: str | None = None) -> Scene:
     """A scene from a built-in name, a path to a TOML file, a nested mapping with the TOML's
     keys (``{"chain": {"n": 20}, "material": {...}}``; named ``name`` or "custom"), or a
@@ -864,6 +974,8 @@ def _range_text(sec: str, name: str, kind) -> str:
     """The allowed values of a key, from its kind and :data:`LIMITS`."""
     if isinstance(kind, tuple):
         return ", ".join(f'"{x}"' for x in kind)
+    if kind.startswith("list:"):
+        return _range_text(sec, name, kind[5:]) + ", or a list of chain.n"
     lim = LIMITS.get(f"{sec}.{name}")
     base = kind.rstrip("?")
     if lim is not None:
@@ -893,11 +1005,12 @@ def key_reference() -> str:
         "",
         "Every key a scene (TOML file, mapping, or `--set SECTION.KEY=VALUE`) may give. The",
         "rules (SI and nondimensional keys, what a `[material]` derives) are in",
-        "[scenes.md](scenes.md). `[material]` keys and keys ending in `_si` are SI; every other",
-        "key is nondimensional, in the units of physics.md section 1: force `eta = pi R w`,",
-        "length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1; \"-\" is a pure",
-        "number. Values must also be finite; \"range\" is what the checks in `mdgran/scene.py`",
-        "allow (an SI key's converted value must fit its plain key's range).",
+        "[scenes.md](scenes.md). `[material]` keys, keys ending in `_si` and `beads.E`,",
+        "`beads.nu`, `beads.w` (named as the `[material]` keys they give per bead) are SI; every",
+        "other key is nondimensional, in the units of physics.md section 1: force",
+        "`eta = pi R w`, length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1;",
+        "\"-\" is a pure number. Values must also be finite; \"range\" is what the checks in",
+        "`mdgran/scene.py` allow (an SI key's converted value must fit its plain key's range).",
         "",
     ]
     for sec, keys in SCHEMA.items():
