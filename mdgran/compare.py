@@ -6,7 +6,8 @@ half the step for fixed-step backends).  The difference between the two, scaled 
 factor, is the backend's own error estimate ``e_B(t)`` (max over beads, units of p).
 
 Predictability.  The micro chain amplifies small differences while its clusters form and
-re-form.  The reference is run once more with the impulse changed by 1e-12 (relative): the
+re-form.  The reference is run once more with the impulse changed by 1e-12 (relative; the
+excitation, :func:`scaled_excitation`, for a scene driven by a pulse or a base motion): the
 growth of that difference gives the amplification factor and a finite-time Lyapunov exponent.
 A backend's predictability horizon is the first time its own error estimate exceeds
 ``PREDICTABLE`` (0.01 p, about 1 % of the equilibrium compression); past it, single events and
@@ -40,8 +41,8 @@ Criteria (each with threshold and measured value in the report; exit status 3 wh
   decidable at the backends' accuracy (a grazing approach; the number excused is reported).
 * ``cluster lifetimes`` and ``cluster sizes``: past the horizon individual events no longer
   match, so the clusters are compared as statistics.  Each backend runs an ensemble: its
-  nominal and refined runs plus ``ensemble`` runs with the impulse changed by ``k x 1e-3``
-  (relative, ``k = 1..ensemble``): within any experimental uncertainty of an impulse, and
+  nominal and refined runs plus ``ensemble`` runs with the impulse (the excitation) changed by
+  ``k x 1e-3`` (relative, ``k = 1..ensemble``): within any experimental uncertainty of an impulse, and
   large enough that the members decorrelate within the run (with micro-star's finite-time
   Lyapunov exponent 0.055, 1e-3 grows to order one by t ~ 125; 1e-6 perturbations stayed
   event-for-event identical to t = 100 and made the test vacuous).  The lifetimes (and sizes) of the clusters formed past the horizon, pooled over
@@ -129,12 +130,26 @@ def run_plan(scene, backends, ensemble: int, refinements: dict) -> dict:
                                 f"({refinement_text(scene, refinements[b])})", dur)
         for k in range(1, ensemble + 1):
             plan[(b, "ensemble", k)] = (b, "ensemble", f"{b} ensemble {k} of "
-                                        f"{ensemble} (impulse +{100 * k * ENSEMBLE_STEP:g}%)",
+                                        f"{ensemble} (excitation +{100 * k * ENSEMBLE_STEP:g}%)",
                                         dur)
     ref = backends[0]
-    plan[(ref, "perturbed")] = (ref, "perturbed", f"{ref} perturbed (impulse +{PERTURBATION:g}, "
-                                "predictability)", dur)
+    plan[(ref, "perturbed")] = (ref, "perturbed", f"{ref} perturbed (excitation "
+                                f"+{PERTURBATION:g}, predictability)", dur)
     return plan
+
+
+def scaled_excitation(scene, factor: float):
+    """``scene`` with its excitation scaled by ``factor``: the impulse velocity, the force
+    pulse's amplitude and the base motion's samples, those it has (an ensemble member or the
+    perturbed run of a scene driven by a pulse or a base motion alone differs from the
+    nominal one by its drive: scaling a zero impulse would change nothing)."""
+    d = scene.data
+    over = [("impulse.velocity", float(d["impulse"]["velocity"]) * factor)]
+    if d["pulse"]["amplitude"]:
+        over.append(("pulse.amplitude", float(d["pulse"]["amplitude"]) * factor))
+    if d["base"]["kind"] != "none":
+        over.append(("base.values", [float(u) * factor for u in d["base"]["values"]]))
+    return scene.with_overrides(over)
 
 
 def _run(series, key, scene, name, **kw):
@@ -162,11 +177,9 @@ def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEM
     res_refined = _run(series, (name, "refined"), scene.with_overrides(overrides), name,
                        progress=prog)
     refined = res_refined.trajectory
-    v0 = float(scene.data["impulse"]["velocity"])
     members = [nominal, refined] + [
-        _run(series, (name, "ensemble", k),
-             scene.with_overrides([("impulse.velocity", v0 * (1 + k * ENSEMBLE_STEP))]), name,
-             progress=prog).trajectory for k in range(1, ensemble + 1)]
+        _run(series, (name, "ensemble", k), scaled_excitation(scene, 1 + k * ENSEMBLE_STEP),
+             name, progress=prog).trajectory for k in range(1, ensemble + 1)]
     return BackendRuns(name, nominal, refined, factor * bead_difference(nominal, refined),
                        factor, wall, res.max_ledger_error, res_refined.max_ledger_error,
                        members, res.status, res.ledger_bound)
@@ -205,9 +218,7 @@ def cluster_statistics(ref: BackendRuns, other: BackendRuns, t_horizon: float):
 
 def predictability(scene, ref: BackendRuns, series=None) -> dict:
     """Growth of a 1e-12 impulse perturbation in the reference."""
-    v0 = float(scene.data["impulse"]["velocity"])
-    pert = _run(series, (ref.name, "perturbed"),
-                scene.with_overrides([("impulse.velocity", v0 * (1 + PERTURBATION))]),
+    pert = _run(series, (ref.name, "perturbed"), scaled_excitation(scene, 1 + PERTURBATION),
                 ref.name).trajectory
     d = bead_difference(ref.nominal, pert)
     t = ref.nominal.time[: len(d)]

@@ -207,7 +207,7 @@ def _markdown(scene, runs, report) -> str:
         "",
         "## Predictability",
         "",
-        f"The reference run with the impulse changed by {p['perturbation']:g} (relative) departs "
+        f"The reference run with the impulse (and any force pulse or base motion) scaled by 1 + {p['perturbation']:g} (relative) departs "
         f"from the nominal run by a factor {p['amplification']:.3g} at most (reached at "
         f"t = {p['t_max_difference']:.4g}); finite-time Lyapunov exponent "
         f"{p['ftle']:.3g} per time unit. A backend pair is judged up to its horizon: the first "

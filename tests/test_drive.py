@@ -200,3 +200,19 @@ def test_lammps_refuses_a_driven_scene():
     with pytest.raises(SceneError) as exc:
         run(sc, "lammps")
     assert exc.value.key == "pulse.amplitude"
+
+
+def test_compare_perturbs_the_excitation_of_a_driven_scene():
+    """compare's ensemble and predictability runs scale the excitation: for a scene driven by
+    a pulse or a base alone, scaling the (zero) impulse would make identical members."""
+    from mdgran.compare import scaled_excitation
+
+    sc = shaken_chain(1.0, 2.0, 0.3, 3)
+    up = scaled_excitation(sc, 1.001)
+    assert up.data["pulse"]["amplitude"] == pytest.approx(1.001)
+    assert np.allclose(up.data["base"]["values"], 1.001 * np.array(sc.data["base"]["values"]),
+                       rtol=1e-15, atol=0)
+    assert up.data["impulse"]["velocity"] == 0.0
+    assert up.data["base"]["interval"] == sc.data["base"]["interval"]
+    plain = load_scene("micro-star")
+    assert scaled_excitation(plain, 1.001).data["impulse"]["velocity"] == pytest.approx(12.012)

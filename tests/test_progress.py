@@ -99,7 +99,7 @@ def test_run_progress_ends_with_100_percent_or_the_status(tty, interrupt_at):
 def test_narrow_terminal_lines_fit_and_keep_their_role():
     out = FakeTTY()
     series = RunSeries({("reference", "nominal"): ("reference", "nominal",
-                                                     "reference ensemble 3 of 3 (impulse +0.3%)",
+                                                     "reference ensemble 3 of 3 (excitation +0.3%)",
                                                      10.0)}, stream=out, interval=0.0,
                        width=72)
     rep = series.reporter(("reference", "nominal"))
