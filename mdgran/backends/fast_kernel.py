@@ -542,11 +542,8 @@ def bead_accelerations(f, fv, x, ve, i, flags, params, now):
     mean-force kick near snap-off) plus the substrate terms the scene switches on (unlike
     beads: the substrate times ``on_site[i]``, all over the bead's mass); ``ve`` the bead's
     velocity estimate at the step's end, for the substrate damping ``-c_s v``.  ``now`` =
-    :func:`drive_at` at the step's end: the substrate acts on ``x - u_b`` and ``ve - u_b'``,
-    the pulse pushes its bead."""
-    if flags.pulse and i == params.drive.bead:
-        f += now[2]
-        fv += now[2]
+    :func:`drive_at` at the step's end: the substrate acts on ``x - u_b`` and ``ve - u_b'``
+    (the pulse is added after the pass, :func:`push_pulsed_bead`)."""
     if flags.base:
         x = x - now[0]
         ve = ve - now[1]
@@ -781,6 +778,19 @@ def merge_segments(flags, params, old, new, h, t1, ks):
 
 
 @njit(inline="always")
+def push_pulsed_bead(flags, params, new, h, t1):
+    """Add the pulse's force at the step's end t1 to its bead's new acceleration and velocity
+    (``a += F / m``, ``v += h/2 F / m``: the force is the same in both kicks), once per pass
+    rather than a test of every bead."""
+    b = params.drive.bead
+    da = drive_at(flags, params, t1)[2]
+    if flags.mixed:
+        da *= params.mix.inv_mass[b]
+    new.a[b] += da
+    new.v[b] += 0.5 * h * da
+
+
+@njit(inline="always")
 def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
     """One Verlet step of length h from the beads ``old`` into ``new``; returns the damping
     power at the end (rates from v_est).  The pass is cut into segments
@@ -788,7 +798,10 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
     several threads in a threaded variant), and :func:`merge_segments` joins them."""
     seg = ks.seg
     if seg.count > 1:
-        return run_segments(params, old, new, h, t0, ks)
+        power = run_segments(params, old, new, h, t0, ks)
+        if flags.pulse:
+            push_pulsed_bead(flags, params, new, h, t0 + h)
+        return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact), 0)
     if ints[I_SWITCHES] > 0:
@@ -797,6 +810,8 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
     if ints[I_STATUS] != OK:
         fail(ks.counters[0], ints[I_STATUS], ints[I_BAD])
     ks.counters[0].flagged = ints[I_FLAGGED]
+    if flags.pulse:
+        push_pulsed_bead(flags, params, new, h, t0 + h)
     return real[R_POWER]
 
 
