@@ -44,13 +44,18 @@ def assert_bitwise(a, b):
         assert np.array_equal(values, b.trajectory.ledger[term]), term
 
 
-@pytest.mark.parametrize("name, options", [("micro-star", {}),
-                                           ("macro-hertz", {"locate_events": False})])
-def test_two_threads_give_the_one_thread_result_bitwise(name, options, monkeypatch):
-    """micro-star (located events) and macro-hertz (step-quantized), 20 beads cut into
-    segments of 6 contacts: 1 and 2 threads bitwise equal; and, against the uncut pass, the
-    same trajectory with D_viscous to round-off."""
-    scene = load_scene(name, [("run.duration", 60.0)])
+DRIVEN = [("pulse.amplitude", 5.0), ("pulse.duration", 2.0), ("pulse.bead", 7)]
+
+
+@pytest.mark.parametrize("name, options, extra", [
+    ("micro-star", {}, []), ("macro-hertz", {"locate_events": False}, []),
+    ("driven/shaken", {}, DRIVEN)])
+def test_two_threads_give_the_one_thread_result_bitwise(name, options, extra, monkeypatch):
+    """micro-star (located events), macro-hertz (step-quantized) and a chain driven by a base
+    motion and a pulse on bead 7 (in the second segment), 20 beads cut into segments of 6
+    contacts: 1 and 2 threads bitwise equal; and, against the uncut pass, the same trajectory
+    with D_viscous to round-off."""
+    scene = load_scene(name, [("run.duration", 60.0)] + extra)
     one = fast_run(scene, 6, 1, monkeypatch, **options)
     two = fast_run(scene, 6, 2, monkeypatch, **options)
     assert two.stats["threads"] == 2 and one.stats["threads"] == 1
