@@ -165,7 +165,7 @@ class LammpsBackend(Backend):
     #: 0.01-0.51 at dt = 0.01: 4x margin (3x at dt = 0.01, where the cap binds)
     ledger_c = {1: 4.0, 2: LEDGER_C_LOCATED}
     #: unlike beads, strikers, thermal velocities, substrate damping: hook and native contact
-    supports = ALL_FEATURES - {"pulse", "base"}  # not yet: docs/excitation.md
+    supports = ALL_FEATURES
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
                  table_file=None, extra_commands=(), contact="hook", events=None, **options):
@@ -184,6 +184,7 @@ class LammpsBackend(Backend):
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
         super().__init__(scene, **options)
         self._check_law_tables(contact_eval)
+        self._check_native_drive()
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
@@ -209,6 +210,17 @@ class LammpsBackend(Backend):
                       "wall_time_s": 0.0, "callback_s": 0.0}
         if self.table is not None:
             self.stats["table"] = self.table.error()
+
+    def _check_native_drive(self):
+        """The native contact does not run excitations yet: refused, naming the key."""
+        from .base import scene_features
+
+        if self.contact != "native":
+            return
+        for feature, key, what in scene_features(self.scene, self.model):
+            if feature in ("pulse", "base"):
+                raise SceneError(key, f"the native LAMMPS contact does not run {what} yet; "
+                                 "the Python hook does (backend 'lammps')")
 
     def _check_law_tables(self, contact_eval):
         """Unlike beads with one law per pair (random diameters with ``contact.lambda``) would
@@ -255,6 +267,7 @@ class LammpsBackend(Backend):
         self.closed = np.ones(nc, dtype=bool) if self.model.gap <= 0 else np.zeros(nc, bool)
         self.d_visc = 0.0
         self.d_hyst = 0.0
+        self.work = 0.0  # external_work: the force pulse's and the base motion's
         self.events = []
         self._last_step = None
         self._error = None
@@ -367,13 +380,16 @@ class LammpsBackend(Backend):
         self._mix = lammps_hook.mix_parameters(self.model, self._ipar, self.dt, points, tether)
         self._extended = bool(self._ipar[lammps_hook.I_MIXED] or
                               self._ipar[lammps_hook.I_SUB_DAMPED])
+        self._drive = lammps_hook.drive_parameters(self.model)  # None: undriven
         self._initial_state(lmp)
         self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0
         self._list_key = None  # (nlocal, nall, nmax, nbuild) of the kept contact list
         self._power_prev = 0.0
-        self._part = np.zeros(2)  # D_hysteresis, D_viscous of this rank since the last sync
+        self._work_prev = 0.0  # the excitations' power at the last step (driven scenes)
+        # D_hysteresis, D_viscous, external work of this rank since the last sync
+        self._part = np.zeros(3)
         self._events_part = []  # (step, left tag, kind, time) of this rank since the last sync
         self._thermo_every = max(1, self.steps_per_frame)
         self._mpi = None
@@ -466,7 +482,14 @@ class LammpsBackend(Backend):
                 if missing >= 0:
                     raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
                                              step)
-                if self._extended:  # unlike beads or substrate damping
+                ext_power = 0.0
+                if self._drive is not None:  # a force pulse or a base motion
+                    nev, power, ext_power, err, where, value = kernel.contact_step_driven(
+                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
+                        self._coef, self._par, self._ipar, step, new_step,
+                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
+                        self._pairs, npair, nown, self._ev, self._mix, self._drive)
+                elif self._extended:  # unlike beads or substrate damping
                     nev, power, err, where, value = kernel.contact_step_mixed(
                         tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
                         self._coef, self._par, self._ipar, step, new_step,
@@ -481,7 +504,7 @@ class LammpsBackend(Backend):
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:
-                    self._account(step, tag, nev, power)
+                    self._account(step, tag, nev, power, ext_power)
             except Exception as exc:  # noqa: BLE001 - kept, raised after the chunk
                 self._error = exc
         if self._error is not None:
@@ -520,9 +543,11 @@ class LammpsBackend(Backend):
         self._mpi.Allgatherv(send, [recv, 2 * counts])
         kernel.unpack_aprev(tag, nlocal, nall, self._tmap, aprev, recv)
 
-    def _account(self, step, tag, nev, power):
-        """This step's events (contact order) and dissipation; with several ranks into this
-        rank's partial sums until the next :meth:`_sync_hook` (as fix mdgran/chain does)."""
+    def _account(self, step, tag, nev, power, ext_power=0.0):
+        """This step's events (contact order), dissipation and (driven scenes) the
+        excitations' work, each rate by the trapezoidal rule between step ends; with several
+        ranks into this rank's partial sums until the next :meth:`_sync_hook` (as fix
+        mdgran/chain does)."""
         ev = self._ev[:nev]
         left = tag[ev[:, 0].astype(np.int64)] if nev else ()
         for r in np.argsort(left, kind="stable") if nev else ():
@@ -541,7 +566,14 @@ class LammpsBackend(Backend):
                 self.d_visc += dv
             else:
                 self._part[1] += dv
+            if self._drive is not None:
+                dw = 0.5 * (ext_power + self._work_prev) * self.dt
+                if self._mpi is None:
+                    self.work += dw
+                else:
+                    self._part[2] += dw
         self._power_prev = power
+        self._work_prev = ext_power
         self._last_step = step
         self.stats["steps"] = int(step)
 
@@ -566,10 +598,11 @@ class LammpsBackend(Backend):
         """After a run on several ranks (collective): the ranks' dissipation added in one sum,
         their events in (step, contact) order, and the first error of any rank on every rank."""
         comm = self._mpi
-        total = np.empty(2)
+        total = np.empty(3)
         comm.Allreduce(self._part, total)
         self.d_hyst += float(total[0])
         self.d_visc += float(total[1])
+        self.work += float(total[2])
         self._part[:] = 0.0
         err = None
         if self._error is not None:
@@ -604,7 +637,7 @@ class LammpsBackend(Backend):
         x, v = self._gather()
         fr = Frame(step=k, time=float(t), x=x, v=v, closed=self.closed.copy(),
                    dissipated_viscous=self.d_visc, dissipated_hysteresis=self.d_hyst,
-                   events=list(self.events))
+                   events=list(self.events), external_work=self.work)
         self.events = []
         return fr
 

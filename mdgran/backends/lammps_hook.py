@@ -170,6 +170,38 @@ def mix_parameters(model, ipar, dt, table_points=None, tether=False) -> HookMix:
                    np.ascontiguousarray(coef), float(model.substrate_damping))
 
 
+class HookDrive(NamedTuple):
+    """The excitations of a driven scene (:mod:`mdgran.drive`) in the hook
+    (:func:`drive_parameters`): the half-sine pulse ``amp sin(pi (t - start) / duration)`` on
+    the atom with tag ``pulse_tag`` (0: no pulse) and the base motion's cubics ``coef[k]``
+    (highest power first, in ``t - k step``; the last row after the samples; ``base`` 0: no
+    base motion), as the fast kernel's ``Drive``."""
+
+    pulse_tag: int
+    amp: float
+    duration: float
+    start: float
+    base: int
+    step: float
+    coef: np.ndarray  # [intervals + 1, 4]
+
+
+def drive_parameters(model):
+    """The :class:`HookDrive` of a chain model's ``drive``, or None without one."""
+    d = model.drive
+    if d is None:
+        return None
+    p, b = d.pulse, d.base
+    first_bead = 2 if model.walls else 1  # tag of bead 0
+    return HookDrive(0 if p is None else int(p.bead) + first_bead,
+                     0.0 if p is None else float(p.amplitude),
+                     1.0 if p is None else float(p.duration),
+                     0.0 if p is None else float(p.start),
+                     0 if b is None else 1, 1.0 if b is None else float(b.step),
+                     np.zeros((1, 4)) if b is None
+                     else np.ascontiguousarray(b.coef, dtype=float))
+
+
 # ---- the law ---------------------------------------------------------------------------------
 
 @njit(cache=True)
@@ -578,6 +610,78 @@ def _bead_forces(tag, nlocal, left, fcon, u, par, ipar, new_step, fext, aprev):
 
 
 @njit(cache=True)
+def drive_at(drive, t):
+    """``(u_b, u_b', F)`` at time t: the base's displacement and velocity, the pulse's force
+    (0 where the scene has none); the operations of the fast kernel's ``drive_at``."""
+    ub, vb, fp = 0.0, 0.0, 0.0
+    if drive.pulse_tag != 0:
+        s = (t - drive.start) / drive.duration
+        if 0.0 <= s <= 1.0:
+            fp = drive.amp * math.sin(math.pi * s)
+    if drive.base != 0:
+        k = min(math.floor(max(t, 0.0) / drive.step), drive.coef.shape[0] - 1)
+        y = t - k * drive.step
+        c = drive.coef[int(k)]
+        ub = ((c[0] * y + c[1]) * y + c[2]) * y + c[3]
+        vb = (3.0 * c[0] * y + 2.0 * c[1]) * y + c[2]
+    return ub, vb, fp
+
+
+@njit(inline="always")
+def _bead_forces_driven(tag, nlocal, left, fcon, u, w, par, ipar, new_step, fext, aprev, mix,
+                        drive, ub, vb, fp):
+    """:func:`_bead_forces_mixed` of a driven scene: the substrate (and its tether) acts on
+    ``y = u - u_b`` and ``w - u_b'`` (``ub``, ``vb``), the pulse's force ``fp`` pushes the atom
+    with tag ``drive.pulse_tag``.  Returns ``(error code, local index, value, substrate
+    damping power, power of the excitations over the owned beads)``: ``F(t) w_b + u_b'
+    sum_i F_sub,i``, ``F_sub,i = -g (k1 y + k3 y^3 + c_s (w - u_b'))``."""
+    walls, ntags, mixed = ipar[I_WALLS], ipar[I_NTAGS], ipar[I_MIXED] != 0
+    k1, k3, k_tether = par[P_K1], par[P_K3], par[P_K1_TETHER]
+    cs = mix.sub_damping
+    based = drive.base != 0
+    power = 0.0
+    work = 0.0
+    sub_sum = 0.0
+    for i in range(nlocal):
+        ext = 0.0
+        t = tag[i]
+        g = 0.0
+        y = 0.0
+        if not (walls and (t == 1 or t == ntags)):
+            g = mix.on_site[t] if mixed else 1.0
+            y = u[i] - ub
+            wv = w[i] - vb
+            fl = fcon[left[i]] if left[i] >= 0 else 0.0
+            ext = (0.0 - fcon[i]) + fl
+            fsub = 0.0
+            if k3 != 0.0:
+                c3 = g * (k3 * math.pow(y, 3.0))
+                ext = ext - c3
+                fsub = fsub - c3
+            if cs != 0.0:
+                cd = g * (cs * wv)
+                ext = ext - cd
+                fsub = fsub - cd
+                if new_step:
+                    power += g * (cs * wv * wv)
+            if t == drive.pulse_tag:
+                ext = ext + fp
+                if new_step:
+                    work += fp * w[i]
+            if based and new_step:
+                sub_sum += fsub - g * (k1 * y)
+        if not math.isfinite(ext):
+            return NON_FINITE, i, ext, power, work
+        fext[i, 0] = ext - g * (k_tether * y) if k_tether != 0.0 else ext
+        fext[i, 1] = 0.0
+        fext[i, 2] = 0.0
+        if new_step:
+            a = ext - g * (k1 * y) if k1 != 0.0 else ext
+            aprev[i] = a * mix.inv_mass[t] if mixed else a
+    return OK, -1, 0.0, power, work + vb * sub_sum
+
+
+@njit(cache=True)
 def contact_list(tag, nlocal, nall, closed, tmap, ipar, left, fcon, pairs):
     """The map and the contact list of :func:`contact_step`, made anew only when LAMMPS has
     re-neighboured (atoms migrated or re-sorted, ghosts made anew: local indices change) or
@@ -655,6 +759,39 @@ def contact_step_mixed(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, 
     if code != OK:
         return nev, rate2, code, where, value
     return nev, power, OK, -1, 0.0
+
+
+@njit(cache=True)
+def contact_step_driven(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef,
+                        par, ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair,
+                        nown, events, mix, drive):
+    """:func:`contact_step_mixed` of a driven scene (``drive``, :class:`HookDrive`): the
+    excitations at the time LAMMPS's velocity Verlet evaluates this step's forces, the end of
+    its position update ``t = step dt`` (:func:`_bead_forces_driven`).  Returns ``(number of
+    events, damping power, power of the excitations over this rank's beads, error code, its
+    local index, its value)``.  A function of its own: the undriven ones are compiled as
+    before."""
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
+    if ipar[I_MIXED] != 0:
+        nev, rate2, code, where, value = _contact_forces_mixed(
+            tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step, new_step, have_last,
+            fcon, events, mix)
+    else:
+        nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed,
+                                                         dprev, coef, par, ipar, step,
+                                                         new_step, have_last, fcon, events)
+    if code != OK:
+        return nev, rate2, 0.0, code, where, value
+    ub, vb, fp = drive_at(drive, step * par[P_DT])
+    code, where, value, sub_power, ext_power = _bead_forces_driven(
+        tag, nlocal, left, fcon, u, w, par, ipar, new_step, fext, aprev, mix, drive, ub, vb, fp)
+    damping = par[P_DAMPING]
+    power = damping * rate2 if damping != 0.0 else 0.0
+    if ipar[I_SUB_DAMPED] != 0:
+        power = power + sub_power
+    if code != OK:
+        return nev, rate2, 0.0, code, where, value
+    return nev, power, ext_power, OK, -1, 0.0
 
 
 @njit(cache=True)
