@@ -1,10 +1,15 @@
 """Imposed excitations (issue 17, mdgran.drive): a half-sine force pulse and a base motion
-under the substrate, on the reference and fast backends, against analytic motions, the
-momentum a pulse gives, and the energy ledger with the excitations' work.
+under the substrate, on the reference, fast and LAMMPS backends (the Python hook and the native
+contact), against analytic motions, the momentum a pulse gives, and the energy ledger with the
+excitations' work.
 
 The fast backend's tests use two kernel variants (free chain with a substrate, pulse and base;
 fixed chain with every term), each compiled once."""
 import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +22,7 @@ from mdgran.scene import SceneError, load_scene
 
 from conftest import make_scene
 
+MPIEXEC = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
 K1 = 0.04  # omega = 0.2: a period of 31.4 time units
 PULSE = {"amplitude": 0.3, "duration": 3.0, "start": 2.0, "bead": 2}
 A_BASE, T_BASE = 0.01, 5.0  # the base accelerates at A_BASE for T_BASE, then coasts
@@ -64,6 +70,7 @@ def two_beads(**run_keys):
     # 0.0025): 4x margin; the excitations evaluated one step off (t = (step -+ 1) dt) move
     # bead 2 by ~1e-3 of the scale
     pytest.param("lammps", 2e-6, marks=pytest.mark.lammps),
+    pytest.param("lammps:native", 2e-6, marks=pytest.mark.lammps),  # located: the same
 ])
 def test_pulse_and_base_move_beads_as_driven_oscillators(backend, tol):
     """Bead 1 rides the accelerating base, bead 2 too and is pushed by the pulse: each follows
@@ -231,15 +238,6 @@ def test_lammps_driven_ledger_closes_and_follows_the_reference(case):
     assert w_hook[-1] != 0.0 and len(hook.trajectory.ev_time) > 0
 
 
-@pytest.mark.lammps
-def test_lammps_native_refuses_a_driven_scene():
-    """Not yet on the native contact: refused before running, naming the key."""
-    sc = make_scene(impulse={"velocity": 0.0}, pulse={"amplitude": 1.0, "duration": 1.0})
-    with pytest.raises(SceneError) as exc:
-        run(sc, "lammps:native")
-    assert exc.value.key == "pulse.amplitude"
-
-
 def test_compare_perturbs_the_excitation_of_a_driven_scene():
     """compare's ensemble and predictability runs scale the excitation: for a scene driven by
     a pulse or a base alone, scaling the (zero) impulse would make identical members."""
@@ -254,3 +252,87 @@ def test_compare_perturbs_the_excitation_of_a_driven_scene():
     assert up.data["base"]["interval"] == sc.data["base"]["interval"]
     plain = load_scene("micro-star")
     assert scaled_excitation(plain, 1.001).data["impulse"]["velocity"] == pytest.approx(12.012)
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("case", ["two beads", *LAMMPS_SHAKEN])
+def test_lammps_hook_and_native_quantized_are_bitwise_equal(case):
+    """In the mode they share (events quantized), fix mdgran/chain's pulse and base keywords
+    and the hook's driven kernel are the same operations in the same order: positions,
+    velocities, events and every ledger term, the external work included, bit for bit."""
+    sc = two_beads(dt=0.0025) if case == "two beads" else shaken_chain(*case)
+    ta = run(sc, "lammps").trajectory
+    tb = run(sc, "lammps:native:quantized").trajectory
+    assert np.array_equal(ta.x, tb.x) and np.array_equal(ta.v, tb.v)
+    assert np.array_equal(ta.ev_time, tb.ev_time)
+    assert list(zip(ta.ev_contact, ta.ev_kind)) == list(zip(tb.ev_contact, tb.ev_kind))
+    for key in ta.ledger:
+        assert np.array_equal(ta.ledger[key], tb.ledger[key]), key
+    assert ta.ledger["external_work"][-1] != 0.0
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("case", LAMMPS_SHAKEN)
+def test_lammps_native_located_is_the_fast_method(case):
+    """With located events the native contact integrates as the fast backend does, the
+    excitations at each pass's end and W with the velocities after the kick: its motion and
+    work are the fast backend's over the whole run to round-off (measured 7e-10 p, 1e-10),
+    second order to the reference up to t = 5 (measured 4e-6 and 2e-4 p), and its ledger
+    closes within the located bound (measured 1.5e-5, 8.7e-5 of E_imp)."""
+    sc = shaken_chain(*case)
+    ref, fast, native = run(sc, "reference"), run(sc, "fast"), run(sc, "lammps:native")
+    assert native.status == "complete"
+    assert native.max_ledger_error <= native.ledger_bound
+    assert native.max_ledger_error < 5e-4
+    w_native = native.trajectory.ledger["external_work"]
+    assert np.abs(fast.trajectory.x - native.trajectory.x).max() < 1e-8
+    assert np.abs(fast.trajectory.ledger["external_work"] - w_native).max() < 1e-8
+    early = ref.trajectory.time <= 5.0
+    scale = sc.energy_scale
+    assert np.abs(ref.trajectory.ledger["external_work"] - w_native)[early].max() < 1e-3 * scale
+    assert np.abs(ref.trajectory.x - native.trajectory.x)[early].max() < 1e-3
+    assert w_native[-1] != 0.0 and len(native.trajectory.ev_time) > 0
+
+
+RANKS_WORKER = """
+import sys
+import numpy as np
+sys.path.insert(0, {tests!r})
+from mpi4py import MPI
+from mdgran import run
+from test_drive import shaken_chain
+out = {{}}
+for spec in ("lammps", "lammps:native:quantized", "lammps:native"):
+    tr = run(shaken_chain(*{case!r}), spec).trajectory
+    for key, value in (("x", tr.x), ("v", tr.v), ("ev_time", tr.ev_time),
+                       ("work", tr.ledger["external_work"]),
+                       ("d_visc", tr.ledger["dissipated_viscous"])):
+        out[spec + "|" + key] = value
+out["ranks"] = MPI.COMM_WORLD.Get_size()
+if MPI.COMM_WORLD.Get_rank() == 0:
+    np.savez(sys.argv[1], **out)
+"""
+
+
+@pytest.mark.lammps
+def test_lammps_driven_run_on_two_ranks_is_the_one_rank_run(tmp_path):
+    """mpiexec -n 2 (the pulsed bead on one rank, the base under both): the hook and the native
+    contact, quantized and located, give the 1-rank runs' positions, velocities and events bit
+    for bit; the work, summed per rank like D_viscous, to round-off."""
+    case = LAMMPS_SHAKEN[0]
+    script = tmp_path / "worker.py"
+    script.write_text(RANKS_WORKER.format(tests=str(Path(__file__).resolve().parent),
+                                          case=case))
+    two, one = tmp_path / "two.npz", tmp_path / "one.npz"
+    for n, out in ((2, two), (1, one)):
+        res = subprocess.run([MPIEXEC, "-n", str(n), sys.executable, str(script), str(out)],
+                             capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    a, b = np.load(one), np.load(two)
+    assert int(a["ranks"]) == 1 and int(b["ranks"]) == 2
+    for key in a:
+        if key.endswith(("|work", "|d_visc")):
+            np.testing.assert_allclose(b[key], a[key], rtol=1e-12, atol=1e-12, err_msg=key)
+        else:
+            assert np.array_equal(a[key], b[key]), key
+    assert a["lammps|work"][-1] != 0.0 and len(a["lammps|ev_time"]) > 0
