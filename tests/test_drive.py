@@ -254,13 +254,23 @@ def test_compare_perturbs_the_excitation_of_a_driven_scene():
     assert scaled_excitation(plain, 1.001).data["impulse"]["velocity"] == pytest.approx(12.012)
 
 
+def driven_dimer():
+    """mixed/dimer (unlike masses and laws) with substrate damping, a pulse and a base."""
+    return load_scene("mixed/dimer", [
+        ("run.duration", 20.0), ("substrate.damping", 0.03), ("pulse.amplitude", 0.8),
+        ("pulse.duration", 1.5), ("pulse.bead", 4), ("base.kind", "displacement"),
+        ("base.interval", 2.0), ("base.values", [0.0, 0.2, -0.1, 0.3, 0.0])])
+
+
 @pytest.mark.lammps
-@pytest.mark.parametrize("case", ["two beads", *LAMMPS_SHAKEN])
+@pytest.mark.parametrize("case", ["two beads", "dimer", *LAMMPS_SHAKEN])
 def test_lammps_hook_and_native_quantized_are_bitwise_equal(case):
     """In the mode they share (events quantized), fix mdgran/chain's pulse and base keywords
     and the hook's driven kernel are the same operations in the same order: positions,
-    velocities, events and every ledger term, the external work included, bit for bit."""
-    sc = two_beads(dt=0.0025) if case == "two beads" else shaken_chain(*case)
+    velocities, events and every ledger term, the external work included, bit for bit (unlike
+    beads too: each bead's mass and substrate factor)."""
+    sc = {"two beads": lambda: two_beads(dt=0.0025),
+          "dimer": driven_dimer}.get(case, lambda: shaken_chain(*case))()
     ta = run(sc, "lammps").trajectory
     tb = run(sc, "lammps:native:quantized").trajectory
     assert np.array_equal(ta.x, tb.x) and np.array_equal(ta.v, tb.v)

@@ -56,6 +56,14 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   unlike beads between walls) and velocities (thermal plus impulse) from
   :meth:`ChainModel.initial_state` (:meth:`LammpsBackend._initial_state`).  The homogeneous
   chain takes none of these branches.
+* **Force pulses and base motions** (``[pulse]``, ``[base]``, :mod:`mdgran.drive`): evaluated
+  at the time LAMMPS's velocity Verlet evaluates the step's forces, the end of its position
+  update ``t = step dt`` (located: each pass's end); the substrate acts on ``u - u_b`` and
+  ``w - u_b'``, the pulse pushes its bead.  Their work ``W`` is integrated by the trapezoidal
+  rule of its rate between step ends, per rank, summed like ``D_viscous``, and is each frame's
+  ``external_work``: the hook's :func:`~mdgran.backends.lammps_hook.contact_step_driven`
+  (``_account``, ``_sync_hook``), the fix's ``pulse`` and ``base`` keywords (its vector's 4th
+  element).  Undriven scenes take none of this.
 * **Located events** (``events="located"``, the default with the native contact): the fix
   integrates the chain itself (``fix move`` and ``fix substrate`` go) and splits each step at
   its earliest contact event over all ranks, as the fast backend does: second order in dt
@@ -164,7 +172,8 @@ class LammpsBackend(Backend):
     #: dt = 0.0025), micro-star 0.42 (dt = 0.0025) and 0.17 (0.01), the other hard cases
     #: 0.01-0.51 at dt = 0.01: 4x margin (3x at dt = 0.01, where the cap binds)
     ledger_c = {1: 4.0, 2: LEDGER_C_LOCATED}
-    #: unlike beads, strikers, thermal velocities, substrate damping: hook and native contact
+    #: unlike beads, strikers, thermal velocities, substrate damping, force pulses and base
+    #: motions: hook and native contact
     supports = ALL_FEATURES
 
     def __init__(self, scene, comm=None, contact_eval="table", table_points=4001,
