@@ -340,7 +340,7 @@ def test_lammps_driven_run_on_two_ranks_is_the_one_rank_run(tmp_path):
         assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     a, b = np.load(one), np.load(two)
     assert int(a["ranks"]) == 1 and int(b["ranks"]) == 2
-    for key in a:
+    for key in (k for k in a if k != "ranks"):
         if key.endswith(("|work", "|d_visc")):
             np.testing.assert_allclose(b[key], a[key], rtol=1e-12, atol=1e-12, err_msg=key)
         else:
