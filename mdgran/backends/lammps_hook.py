@@ -729,6 +729,21 @@ def contact_step(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, 
     return nev, power, OK, -1, 0.0
 
 
+@njit(inline="always")
+def _displaced_contact_forces(tag, x, v, nall, x0, closed, dprev, aprev, tmap, coef, par, ipar,
+                              step, new_step, have_last, u, w, fcon, pairs, npair, nown,
+                              events, mix):
+    """The beads' displacements and velocity estimates, then the contact forces: each
+    contact's own law for unlike beads (``I_MIXED``), else the chain's; returns ``(number of
+    events, sum of squared closing rates, error code, its local index, its value)``."""
+    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
+    if ipar[I_MIXED] != 0:
+        return _contact_forces_mixed(tag, pairs, npair, nown, u, w, closed, dprev, par, ipar,
+                                     step, new_step, have_last, fcon, events, mix)
+    return _contact_forces(pairs, npair, nown, u, w, closed, dprev, coef, par, ipar, step,
+                           new_step, have_last, fcon, events)
+
+
 @njit(cache=True)
 def contact_step_mixed(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, tmap, coef,
                        par, ipar, step, new_step, have_last, u, w, fcon, left, pairs, npair, nown,
@@ -739,15 +754,9 @@ def contact_step_mixed(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev, 
     bead its mass, substrate factor and substrate damping (:func:`_bead_forces_mixed`), whose
     power is added to the returned one.  A function of its own, so that the homogeneous
     chain's :func:`contact_step` is compiled as before."""
-    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
-    if ipar[I_MIXED] != 0:
-        nev, rate2, code, where, value = _contact_forces_mixed(
-            tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step, new_step, have_last,
-            fcon, events, mix)
-    else:
-        nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed,
-                                                         dprev, coef, par, ipar, step,
-                                                         new_step, have_last, fcon, events)
+    nev, rate2, code, where, value = _displaced_contact_forces(
+        tag, x, v, nall, x0, closed, dprev, aprev, tmap, coef, par, ipar, step, new_step,
+        have_last, u, w, fcon, pairs, npair, nown, events, mix)
     if code != OK:
         return nev, rate2, code, where, value
     code, where, value, sub_power = _bead_forces_mixed(tag, nlocal, left, fcon, u, w, par,
@@ -771,15 +780,9 @@ def contact_step_driven(tag, x, v, fext, nlocal, nall, x0, closed, dprev, aprev,
     events, damping power, power of the excitations over this rank's beads, error code, its
     local index, its value)``.  A function of its own: the undriven ones are compiled as
     before."""
-    _displacements(tag, x, v, x0, aprev, nall, par, ipar, step > 0 and have_last, tmap, u, w)
-    if ipar[I_MIXED] != 0:
-        nev, rate2, code, where, value = _contact_forces_mixed(
-            tag, pairs, npair, nown, u, w, closed, dprev, par, ipar, step, new_step, have_last,
-            fcon, events, mix)
-    else:
-        nev, rate2, code, where, value = _contact_forces(pairs, npair, nown, u, w, closed,
-                                                         dprev, coef, par, ipar, step,
-                                                         new_step, have_last, fcon, events)
+    nev, rate2, code, where, value = _displaced_contact_forces(
+        tag, x, v, nall, x0, closed, dprev, aprev, tmap, coef, par, ipar, step, new_step,
+        have_last, u, w, fcon, pairs, npair, nown, events, mix)
     if code != OK:
         return nev, rate2, 0.0, code, where, value
     ub, vb, fp = drive_at(drive, step * par[P_DT])
