@@ -68,6 +68,38 @@ CASES = {
     "lammps-native-k3-micro-star": ("micro-star", "lammps",
                                     {"run.duration": 40.0, "substrate.k3": 0.01},
                                     {"contact": "native"}),
+    # unlike beads (issue 17): the general mixed kernel and the variants that leave out what a
+    # chain does not need; the density-only chains (one law, masses per bead), unit masses,
+    # thermal starts and substrate damping, several segments and threads, quantized and exact
+    "fast-mixed-dimer": ("mixed/dimer", "fast", {}, {}),
+    "fast-mixed-intruder": ("mixed/intruder", "fast", {}, {}),
+    "fast-mixed-tapered": ("mixed/tapered", "fast", {}, {}),
+    "fast-mixed-striker": ("mixed/striker", "fast", {}, {}),
+    "fast-mixed-density-free": ("micro-star", "fast", {
+        "chain.boundary": "free", "beads.density": [1.0, 0.3] * 10,
+        "thermal.temperature": 0.5, "substrate.damping": 0.01}, {}),
+    "fast-mixed-dimer-thermal": ("mixed/dimer", "fast", {
+        "thermal.temperature": 1.0, "substrate.damping": 0.02, "substrate.k3": 0.01}, {}),
+    "fast-mixed-unit-mass": ("mixed/dimer", "fast", {"beads.mass": [1.0] * 21}, {}),
+    "fast-mixed-dimer-long": ("mixed/dimer", "fast", {"chain.n": 5001, "run.duration": 20.0}, {}),
+    "fast-mixed-dimer-threads": ("mixed/dimer", "fast", {
+        "chain.n": 5001, "run.duration": 20.0, "run.threads": 2}, {}),
+    "fast-mixed-density-long": ("micro-star", "fast", {
+        "chain.n": 5001, "run.duration": 20.0, "beads.density": [1.0, 0.3] * 2500 + [1.0],
+        "thermal.temperature": 0.5}, {}),
+    "fast-mixed-pulse": ("driven/pulse", "fast", {
+        "chain.n": 21, "beads.pattern": "dimer", "beads.ratio": 0.6}, {}),
+    "fast-mixed-shaken": ("driven/shaken", "fast", {"beads.density": [1.0, 0.3] * 10}, {}),
+    "fast-quantized-mixed-dimer": ("mixed/dimer", "fast", {}, {"locate_events": False}),
+    "fast-quantized-mixed-intruder": ("mixed/intruder", "fast", {}, {"locate_events": False}),
+    "fast-quantized-mixed-density-free": ("micro-star", "fast", {
+        "chain.boundary": "free", "beads.density": [1.0, 0.3] * 10,
+        "thermal.temperature": 0.5}, {"locate_events": False}),
+    "fast-exact-mixed-dimer": ("mixed/dimer", "fast", {}, {"contact_eval": "exact"}),
+    "fast-exact-mixed-intruder": ("mixed/intruder", "fast", {}, {"contact_eval": "exact"}),
+    "fast-mixed-hertz-dimer": ("macro-hertz", "fast", {
+        "chain.n": 21, "beads.pattern": "dimer", "beads.ratio": 0.6}, {}),
+    "fast-mixed-hertz-density": ("macro-hertz", "fast", {"beads.density": [1.0, 0.3] * 10}, {}),
 }
 
 
