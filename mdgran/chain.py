@@ -446,6 +446,21 @@ class ChainModel:
         normal = np.random.default_rng(self.seed).standard_normal(self.n)
         return np.sqrt(self.temperature / self.masses) * normal
 
+    def _rest_at_contact(self, x, closed) -> np.ndarray:
+        """:meth:`equilibrium` of a chain whose contacts switch at ``delta = 0`` (Hertz, DMT):
+        ``x = 0``, every contact touching, if the forces there balance (Hertz: every force is
+        0); else none exists with every contact closed (unlike DMT pairs pull unequally, and
+        any stretch would open one)."""
+        from .scene import SceneError
+
+        force = self.masses * self.acceleration(x, np.zeros(self.n), closed)
+        scale = 1.0 + float(np.max(np.abs(self.law_force(self.compressions(x)))))
+        if np.max(np.abs(force)) <= 4.0 * np.finfo(float).eps * scale:
+            return x
+        raise SceneError("beads", "the closed chain of these beads has no static equilibrium: "
+                         "its contacts open at delta = 0 and unlike pairs pull unequally there; "
+                         "use a free chain (chain.boundary = 'free') or like beads")
+
     @cached_property
     def equilibrium(self) -> np.ndarray:
         """Displacements [n] at which every bead of the closed chain is at rest,
@@ -467,6 +482,8 @@ class ChainModel:
 
         x = np.zeros(self.n)
         force = net_force(x)
+        if force is None:  # delta_off = 0 (Hertz, DMT): every contact on its switching point
+            return self._rest_at_contact(x, closed)
         for _ in range(50):
             delta = self.compressions(x)
             scale = 1.0 + float(np.max(np.abs(self.law_force(delta))))

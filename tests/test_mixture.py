@@ -387,3 +387,18 @@ def test_fast_with_one_law_per_pair_needs_the_exact_law():
     ref = run(sc, "reference").trajectory
     assert list(zip(fast.ev_contact, fast.ev_kind)) == list(zip(ref.ev_contact, ref.ev_kind))
     assert np.abs(fast.x - ref.x).max() < 1e-5 * np.abs(ref.x).max()  # dt 0.0025, order 2
+
+
+def test_walled_mixture_whose_contacts_open_at_touch():
+    """Contacts that switch at delta = 0 (Hertz, DMT) between walls: a Hertz mixture starts at
+    x = 0, where every force is 0 (it crashed: the equilibrium search found its start off the
+    closed branch); a DMT mixture, whose unlike pairs pull unequally at touch, is refused
+    naming the key."""
+    hertz = load_scene("macro-hertz", [("beads.pattern", "dimer"), ("beads.ratio", 0.6)])
+    x, v, closed = model_from_scene(hertz).initial_state(1, 0.5)
+    assert np.all(x == 0.0) and v[0] == 0.5 and closed.all()
+    dmt = load_scene("micro-star", [("contact.law", "dmt"), ("beads.pattern", "dimer"),
+                                    ("beads.ratio", 0.6)])
+    with pytest.raises(SceneError) as exc:
+        model_from_scene(dmt).initial_state(1, 0.5)
+    assert exc.value.key == "beads"
