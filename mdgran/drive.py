@@ -83,6 +83,15 @@ class BaseMotion:
         c, s = self._piece(t)
         return (3.0 * c[..., 0] * s + 2.0 * c[..., 1]) * s + c[..., 2]
 
+    def at(self, t: float) -> tuple:
+        """``(u_b, u_b')`` at one time t (float): the same cubic as :meth:`position` and
+        :meth:`velocity`, one piece lookup in plain floats (the reference backend's right-hand
+        side asks for it a few times per evaluation)."""
+        k = min(math.floor(max(t, 0.0) / self.step), len(self.coef) - 1)
+        c3, c2, c1, c0 = self.coef[k].tolist()
+        s = t - k * self.step
+        return ((c3 * s + c2) * s + c1) * s + c0, (3.0 * c3 * s + 2.0 * c2) * s + c1
+
     @property
     def peak_velocity(self) -> float:
         """max |u_b'| (p q), over the samples' grid and each cubic's extremum."""
@@ -149,7 +158,7 @@ class Drive:
         """``(u_b, u_b')`` at t; ``(0, 0)`` without a base motion."""
         if self.base is None:
             return 0.0, 0.0
-        return float(self.base.position(t)), float(self.base.velocity(t))
+        return self.base.at(float(t))
 
 
 def drive_from_scene(scene) -> Drive | None:

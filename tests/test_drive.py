@@ -180,6 +180,22 @@ def test_base_series_interpolate_their_samples():
     assert b.position(6.0) == pytest.approx(disp[-1], abs=1e-7)
 
 
+
+@settings(max_examples=40, deadline=None)
+@given(kind=st.sampled_from([base_from_displacement, base_from_acceleration]),
+       step=st.floats(1e-3, 10.0), seed=st.integers(0, 2**32 - 1),
+       times=st.lists(st.floats(-5.0, 200.0), min_size=1, max_size=20))
+def test_base_at_one_time_is_the_vectorized_cubic(kind, step, seed, times):
+    """``BaseMotion.at`` (the reference backend's scalar lookup) gives bit for bit the
+    ``position`` and ``velocity`` of the vectorized evaluation, before, inside and after the
+    samples."""
+    values = np.random.default_rng(seed).normal(size=12)
+    values[0] = 0.0
+    b = kind(step, values)
+    at = np.array([b.at(t) for t in times])
+    assert at[:, 0].tobytes() == b.position(np.array(times)).tobytes()
+    assert at[:, 1].tobytes() == b.velocity(np.array(times)).tobytes()
+
 @pytest.mark.parametrize("keys,key", [
     ({"pulse": {"amplitude": 1.0}}, "pulse.duration"),
     ({"pulse": {"duration": 1.0}}, "pulse.duration"),
