@@ -46,8 +46,9 @@ pulse flicker).  Energies at events use the exact law.  The exact law is the sca
 :mod:`mdgran.contact_scalar`.
 
 Terms switched off (walls, damping, k1, k3, event location, exact law) are compile-time
-constants of :func:`get_kernel` (:class:`Flags`): each combination is a separately compiled
-variant (cached on disk by numba), so an absent term costs nothing in the loop.
+constants of :func:`get_kernel` (:class:`Flags`, passed down as literal booleans): each
+combination is a separately compiled variant (cached on disk by numba), so an absent term
+costs nothing in the loop.
 
 **Segments and threads.**  The pass is cut into segments of :data:`SEGMENT` contacts
 (:class:`Segments`, :func:`segment_pass`).  Each segment finishes the beads inside it and
@@ -123,6 +124,11 @@ class Flags(NamedTuple):
     base: bool = False  # a base motion under the substrate (:class:`Drive`)
 
 
+#: Index of each flag in a variant's flags (``flags[PULSE]``): inside a variant they are a
+#: tuple of literal booleans, so that each function taking them is compiled for the variant.
+(WALLS, DAMPED, K1_ON, K3_ON, LOCATE, EXACT, HERTZ, MIXED, SUB_DAMPED, OFF_SUBSTRATE, THREADED, PULSE, BASE) = range(13)
+
+
 class ForceTable(NamedTuple):
     """The force table of :class:`mdgran.contact.ContactTable`: the cubic of interval ``i``
     in ``w = sqrt(delta - base)`` has coefficients ``coef[i]`` (highest power first) in
@@ -167,7 +173,7 @@ def no_mix() -> Mix:
 
 
 class Drive(NamedTuple):
-    """The excitations of :mod:`mdgran.drive` (flags.pulse, flags.base): the half-sine pulse
+    """The excitations of :mod:`mdgran.drive` (flags[PULSE], flags[BASE]): the half-sine pulse
     ``amp sin(pi (t - start) / duration)`` on bead ``bead``; the base motion's cubics
     ``coef[k]`` (highest power first, in ``t - k step``; the last row after the samples)."""
 
@@ -210,9 +216,9 @@ class Params(NamedTuple):
     mean_force_below: float  # closed contacts with delta below it get the mean-force kick
     law: SchwarzConstants
     table: ForceTable
-    mix: Mix  # unlike beads (flags.mixed); no_mix() otherwise
-    sub_damping: float  # c_s (flags.sub_damped)
-    drive: Drive  # force pulse and base motion (flags.pulse, flags.base); no_drive() otherwise
+    mix: Mix  # unlike beads (flags[MIXED]); no_mix() otherwise
+    sub_damping: float  # c_s (flags[SUB_DAMPED])
+    drive: Drive  # force pulse and base motion (flags[PULSE], flags[BASE]); no_drive() otherwise
 
 
 class Beads(NamedTuple):
@@ -333,14 +339,26 @@ def new_state(n_contacts: int, event_capacity: int, segment: int | None = None) 
 
 
 # ---- geometry and the force of a closed contact -------------------------------------------
-# The hot helpers are inlined (numba IR) into each compiled variant, where the flags are
-# constants, so the branches on them fold away; the rare-path ones take the flags at run time.
+# A variant's flags reach the hot functions as a tuple of literal booleans (``flags[PULSE]``),
+# so each is compiled for the variant and the branches on them fold away.  The pass
+# (segment_pass) and the joins (merge_segments, switch_all) are functions of their own; the
+# small helpers and the loop around the pass are inlined (numba IR).  Inlining the pass too
+# made numba copy its IR at every level: a variant took 30 s to compile instead of 13.  The
+# rare-path functions take the flags at run time (:func:`at_run_time`): compiled once.
 @njit(inline="always")
 def beads_of(walls, j):
     """Left and right bead of contact j (walls: j-1, j, the walls being -1 and n)."""
     if walls:
         return j - 1, j
     return j, j + 1
+
+
+@njit(inline="always")
+def at_run_time(flags):
+    """The variant's flags as a :class:`Flags` of plain booleans: the rare-path functions
+    (switching, settling, the excitations' power, segment edges) take them so, and are
+    compiled once for every variant."""
+    return Flags(*flags)
 
 
 @njit(cache=True)
@@ -388,7 +406,7 @@ def contact_force(exact, hertz, d, params):
     return spline(params.table, w), True
 
 
-# ---- unlike beads: each contact's own law (flags.mixed; Mix) --------------------------------
+# ---- unlike beads: each contact's own law (flags[MIXED]; Mix) --------------------------------
 @njit(inline="always")
 def class_law(mix, c):
     """The Schwarz constants of law class c."""
@@ -421,13 +439,13 @@ def class_spline(params, c, u):
 def force_at(flags, params, j, d):
     """(f, ok): force of closed contact j at compression d: the one law, or contact j's
     (``A f(d / L)``)."""
-    if not flags.mixed:
-        return contact_force(flags.exact, flags.hertz, d, params)
+    if not flags[MIXED]:
+        return contact_force(flags[EXACT], flags[HERTZ], d, params)
     c = params.mix.cls[j]
     u = d * params.mix.inv_len[j]
-    if flags.exact or flags.hertz:
+    if flags[EXACT] or flags[HERTZ]:
         ok = u < params.delta_max
-        f = law_force(u, flags.hertz, class_law(params.mix, c)) if ok else 0.0
+        f = law_force(u, flags[HERTZ], class_law(params.mix, c)) if ok else 0.0
         return params.mix.force_scale[j] * f, ok
     f, ok = class_spline(params, c, u)
     return params.mix.force_scale[j] * f, ok
@@ -436,9 +454,9 @@ def force_at(flags, params, j, d):
 @njit(inline="always")
 def energy_at(flags, params, j, d):
     """Exact energy of closed contact j at compression d (``A L V(d / L)`` when mixed)."""
-    if not flags.mixed:
-        return law_energy(d, flags.hertz, params.law)
-    e = law_energy(d * params.mix.inv_len[j], flags.hertz, class_law(params.mix,
+    if not flags[MIXED]:
+        return law_energy(d, flags[HERTZ], params.law)
+    e = law_energy(d * params.mix.inv_len[j], flags[HERTZ], class_law(params.mix,
                                                                        params.mix.cls[j]))
     return params.mix.force_scale[j] * params.mix.length[j] * e
 
@@ -452,7 +470,7 @@ def delta_off_at(params, j):
 @njit(inline="always")
 def mean_force_at(flags, params, j, d0, d1):
     """Mean force of contact j over [d0, d1] (:func:`schwarz_mean_force`, scaled)."""
-    if not flags.mixed:
+    if not flags[MIXED]:
         return schwarz_mean_force(d0, d1, params.law)
     il = params.mix.inv_len[j]
     law = class_law(params.mix, params.mix.cls[j])
@@ -488,7 +506,7 @@ def quantized_switch(flags, params, j, d, doff, x_old, h, t0, closed):
     time interpolated linearly between the step's ends, and the hysteresis loss ``V(d)`` on
     opening (0 on closing)."""
     thr = doff if closed[j] else 0.0
-    d0 = across(flags.walls, x_old, np.int64(j)) - params.gap
+    d0 = across(flags[WALLS], x_old, np.int64(j)) - params.gap
     span = d0 - d
     frac = min(max((d0 - thr) / span if span != 0.0 else 1.0, 0.0), 1.0)
     loss = 0.0
@@ -504,11 +522,11 @@ def drive_at(flags, params, t):
     (each 0 when the variant has none; :mod:`mdgran.drive`)."""
     ub, vb, fp = 0.0, 0.0, 0.0
     d = params.drive
-    if flags.pulse:
+    if flags[PULSE]:
         s = (t - d.start) / d.duration
         if 0.0 <= s <= 1.0:
             fp = d.amp * math.sin(math.pi * s)
-    if flags.base:
+    if flags[BASE]:
         k = min(math.floor(max(t, 0.0) / d.step), d.coef.shape[0] - 1)
         u = t - k * d.step
         c = d.coef[np.uint64(k)]
@@ -523,15 +541,15 @@ def external_power(flags, params, beads, t):
     sum_i F_sub,i`` (:mod:`mdgran.drive`)."""
     ub, vb, fp = drive_at(flags, params, t)
     p = 0.0
-    if flags.pulse:
+    if flags[PULSE]:
         p += fp * beads.v[params.drive.bead]
-    if flags.base:
+    if flags[BASE]:
         total = 0.0
         for i in range(beads.x.shape[0]):
             y = beads.x[i] - ub
             f = -(params.k1 * y + params.k3 * y * y * y
                   + params.sub_damping * (beads.v[i] - vb))
-            total += params.mix.on_site[i] * f if flags.off_substrate else f
+            total += params.mix.on_site[i] * f if flags[OFF_SUBSTRATE] else f
         p += vb * total
     return p
 
@@ -544,29 +562,29 @@ def bead_accelerations(f, fv, x, ve, i, flags, params, now):
     velocity estimate at the step's end, for the substrate damping ``-c_s v``.  ``now`` =
     :func:`drive_at` at the step's end: the substrate acts on ``x - u_b`` and ``ve - u_b'``
     (the pulse is added after the pass, :func:`push_pulsed_bead`)."""
-    if flags.base:
+    if flags[BASE]:
         x = x - now[0]
         ve = ve - now[1]
-    if flags.sub_damped:
+    if flags[SUB_DAMPED]:
         fd = params.sub_damping * ve
-        if flags.off_substrate:
+        if flags[OFF_SUBSTRATE]:
             fd *= params.mix.on_site[i]
         f -= fd
         fv -= fd
-    if flags.mixed:
-        g = params.mix.on_site[i] if flags.off_substrate else 1.0
-        if flags.k1_on:
+    if flags[MIXED]:
+        g = params.mix.on_site[i] if flags[OFF_SUBSTRATE] else 1.0
+        if flags[K1_ON]:
             f -= g * (params.k1 * x)
             fv -= g * (params.k1 * x)
-        if flags.k3_on:
+        if flags[K3_ON]:
             f -= g * (params.k3 * x * x * x)
             fv -= g * (params.k3 * x * x * x)
         im = params.mix.inv_mass[i]
         return f * im, fv * im
-    if flags.k1_on:
+    if flags[K1_ON]:
         f -= params.k1 * x
         fv -= params.k1 * x
-    if flags.k3_on:
+    if flags[K3_ON]:
         f -= params.k3 * x * x * x
         fv -= params.k3 * x * x * x
     return f, fv
@@ -576,7 +594,7 @@ def bead_accelerations(f, fv, x, ve, i, flags, params, now):
 def substrate_power(v, i, flags, params):
     """Dissipation rate of the substrate damping on bead i, ``g_i c_s v^2``."""
     p = params.sub_damping * v * v
-    return p * params.mix.on_site[i] if flags.off_substrate else p
+    return p * params.mix.on_site[i] if flags[OFF_SUBSTRATE] else p
 
 
 @njit(inline="always")
@@ -589,7 +607,7 @@ def quantized_due(closed, d, delta_off):
     return d > 0.0 if strict else d >= 0.0
 
 
-@njit(inline="always")
+@njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
     an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact)``): returns
@@ -612,7 +630,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
     h, t0, size, flag, ev_real, ev_contact = seg
-    walls, hertz = flags.walls, flags.hertz
+    walls, hertz = flags[WALLS], flags[HERTZ]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
     # unsigned indices: numba emits no negative-index wraparound code for them
@@ -648,9 +666,9 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             ve_r = vh_r + hh * a_r
         d = x_c - x_r - gap
         r = ve_c - ve_r
-        if flags.mixed:
+        if flags[MIXED]:
             doff = params.mix.delta_off[j]
-        if not flags.locate and quantized_due(closed[j], d, doff):
+        if not flags[LOCATE] and quantized_due(closed[j], d, doff):
             k = j0 + np.uint64(nev)
             ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
                 flags, params, j, d, doff, xo, h, t0, closed)
@@ -662,7 +680,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
                 status, bad = OUT_OF_TABLE, np.int64(j)
             fv_r = f_r
             # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
-            if flags.mixed:  # the class's band, in the contact's own units
+            if flags[MIXED]:  # the class's band, in the contact's own units
                 near = (d * params.mix.inv_len[j] < params.mix.below[params.mix.cls[j]])
             else:
                 near = d < params.mean_force_below
@@ -670,7 +688,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
                 d0 = across(walls, xo, np.int64(j)) - gap
                 fv_r = (2.0 * mean_force_at(flags, params, j, d0, d)
                         - force_at(flags, params, j, d0)[0])
-            if flags.damped:
+            if flags[DAMPED]:
                 f_r += c * r
                 fv_r += c * r
                 power += c * r * r
@@ -679,7 +697,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         else:
             g = -d
             gd = -r
-        if flags.locate:
+        if flags[LOCATE]:
             # a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
             if g < 0.0 or g < 0.5 * h * gd:
                 if nflag < flag.shape[1]:
@@ -690,7 +708,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         if rb >= one and (j > j0 or s == 0):  # finish the left bead
             a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, rb - one, flags,
                                        params, now)
-            if flags.sub_damped:
+            if flags[SUB_DAMPED]:
                 power += substrate_power(ve_c - now[1], rb - one, flags, params)
             xn[rb - one] = x_c
             an[rb - one] = a
@@ -699,7 +717,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         f_l, fv_l = f_r, fv_r
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params, now)
-        if flags.sub_damped:
+        if flags[SUB_DAMPED]:
             power += substrate_power(ve_c - now[1], n - one, flags, params)
         xn[n - one] = x_c
         an[n - one] = a
@@ -713,7 +731,7 @@ def finish_edge(flags, params, old, new, h, t1, seg, s):
     of segment s - 1 and the first of s, as :func:`segment_pass` finishes every other bead
     (the same operations; the step ends at t1); returns its substrate damping power."""
     now = drive_at(flags, params, t1)
-    b = s * seg.size - (1 if flags.walls else 0)
+    b = s * seg.size - (1 if flags[WALLS] else 0)
     hh = 0.5 * h
     a_b = old.a[b]
     vh = old.v[b] + hh * a_b
@@ -726,7 +744,7 @@ def finish_edge(flags, params, old, new, h, t1, seg, s):
     new.x[b] = x
     new.a[b] = a
     new.v[b] = vh + hh * av
-    return substrate_power(ve - now[1], b, flags, params) if flags.sub_damped else 0.0
+    return substrate_power(ve - now[1], b, flags, params) if flags[SUB_DAMPED] else 0.0
 
 
 @njit(cache=True)
@@ -751,7 +769,7 @@ def gather_flags(seg, s, total):
         seg.flag[0, total + k] = seg.flag[s, k]
 
 
-@njit(inline="always")
+@njit
 def merge_segments(flags, params, old, new, h, t1, ks):
     """After every segment of a pass (:func:`segment_pass`): finish the beads at their
     edges, then in segment order add up the damping power, log the step-quantized switches
@@ -764,7 +782,7 @@ def merge_segments(flags, params, old, new, h, t1, ks):
     total = 0
     for s in range(seg.count):
         if s > 0:
-            power += finish_edge(flags, params, old, new, h, t1, seg, s)
+            power += finish_edge(at_run_time(flags), params, old, new, h, t1, seg, s)
             if total < FLAG_CAP:
                 gather_flags(seg, s, total)
         power += real[s, R_POWER]
@@ -784,7 +802,7 @@ def push_pulsed_bead(flags, params, new, h, t1):
     rather than a test of every bead."""
     b = params.drive.bead
     da = drive_at(flags, params, t1)[2]
-    if flags.mixed:
+    if flags[MIXED]:
         da *= params.mix.inv_mass[b]
     new.a[b] += da
     new.v[b] += 0.5 * h * da
@@ -799,7 +817,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
     seg = ks.seg
     if seg.count > 1:
         power = run_segments(params, old, new, h, t0, ks)
-        if flags.pulse:
+        if flags[PULSE]:
             push_pulsed_bead(flags, params, new, h, t0 + h)
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
@@ -810,7 +828,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
     if ints[I_STATUS] != OK:
         fail(ks.counters[0], ints[I_STATUS], ints[I_BAD])
     ks.counters[0].flagged = ints[I_FLAGGED]
-    if flags.pulse:
+    if flags[PULSE]:
         push_pulsed_bead(flags, params, new, h, t0 + h)
     return real[R_POWER]
 
@@ -922,13 +940,13 @@ def switch(flags, params, j, t, beads, ks):
     x, a = beads.x, beads.a
     n = x.shape[0]
     c = params.damping
-    d = across(flags.walls, x, j) - params.gap
-    r = across(flags.walls, beads.v, j)
+    d = across(flags[WALLS], x, j) - params.gap
+    r = across(flags[WALLS], beads.v, j)
     f_old = 0.0
     f_new = 0.0
     if closed[j]:
         f_old, ok = force_at(flags, params, j, d)
-        if flags.damped:
+        if flags[DAMPED]:
             f_old += c * r
             counters.power -= c * r * r
         counters.d_hysteresis += energy_at(flags, params, j, d)
@@ -940,15 +958,15 @@ def switch(flags, params, j, t, beads, ks):
         f_new, ok = force_at(flags, params, j, d)
         if not ok:
             fail(counters, OUT_OF_TABLE, j)
-        if flags.damped:
+        if flags[DAMPED]:
             f_new += c * r
             counters.power += c * r * r
-    left, right = beads_of(flags.walls, j)
+    left, right = beads_of(flags[WALLS], j)
     df = f_new - f_old
     if left >= 0:
-        a[left] -= df * params.mix.inv_mass[left] if flags.mixed else df
+        a[left] -= df * params.mix.inv_mass[left] if flags[MIXED] else df
     if right < n:
-        a[right] += df * params.mix.inv_mass[right] if flags.mixed else df
+        a[right] += df * params.mix.inv_mass[right] if flags[MIXED] else df
     count_switch(ks, j, t)
 
 
@@ -962,7 +980,7 @@ def settle(flags, params, contacts, count, t, beads, ks):
         moved = False
         for k in range(count):
             j = contacts[k]
-            g, gd, _ = event_function(flags.walls, params, j, beads, ks.closed)
+            g, gd, _ = event_function(flags[WALLS], params, j, beads, ks.closed)
             if g < -STATE_TOL or (g <= 0.0 and gd < 0.0):
                 switch(flags, params, j, t, beads, ks)
                 moved = True
@@ -989,39 +1007,39 @@ def init_acc(flags, params, beads, ks):
     power = 0.0
     for i in range(n):
         a[i] = 0.0
-        if flags.sub_damped:
+        if flags[SUB_DAMPED]:
             power += substrate_power(v[i], i, flags, params)
-            a[i] -= (params.mix.on_site[i] * (params.sub_damping * v[i]) if flags.mixed
+            a[i] -= (params.mix.on_site[i] * (params.sub_damping * v[i]) if flags[MIXED]
                      else params.sub_damping * v[i])
-        g = params.mix.on_site[i] if flags.mixed else 1.0
-        if flags.k1_on:
-            a[i] -= g * (params.k1 * x[i]) if flags.mixed else params.k1 * x[i]
-        if flags.k3_on:
-            a[i] -= (g * (params.k3 * x[i] * x[i] * x[i]) if flags.mixed
+        g = params.mix.on_site[i] if flags[MIXED] else 1.0
+        if flags[K1_ON]:
+            a[i] -= g * (params.k1 * x[i]) if flags[MIXED] else params.k1 * x[i]
+        if flags[K3_ON]:
+            a[i] -= (g * (params.k3 * x[i] * x[i] * x[i]) if flags[MIXED]
                      else params.k3 * x[i] * x[i] * x[i])
     for j in range(closed.shape[0]):
         if not closed[j]:
             continue
-        f, ok = force_at(flags, params, j, across(flags.walls, x, j) - params.gap)
+        f, ok = force_at(flags, params, j, across(flags[WALLS], x, j) - params.gap)
         if not ok:
             fail(ks.counters[0], OUT_OF_TABLE, j)
-        if flags.damped:
-            r = across(flags.walls, v, j)
+        if flags[DAMPED]:
+            r = across(flags[WALLS], v, j)
             f += params.damping * r
             power += params.damping * r * r
-        left, right = beads_of(flags.walls, j)
+        left, right = beads_of(flags[WALLS], j)
         if left >= 0:
             a[left] -= f
         if right < n:
             a[right] += f
-    if flags.mixed:
+    if flags[MIXED]:
         for i in range(n):
             a[i] *= params.mix.inv_mass[i]
     return power
 
 
 # ---- the stepping loop, one compiled variant per Flags ---------------------------------------
-@njit(inline="always")
+@njit
 def switch_all(flags, params, count, t, beads, ks):
     """Switch the located contacts ks.switching[:count] at t, then settle them."""
     for k in range(count):
@@ -1065,8 +1083,8 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
             if redo > 0:  # this pass ends on the events
                 ns, te = redo, h
             else:
-                if flags.locate and counters.flagged > 0:
-                    te, ns = locate_events(flags.walls, params, old, new.x, h, tol, ks)
+                if flags[LOCATE] and counters.flagged > 0:
+                    te, ns = locate_events(bool(flags[WALLS]), params, old, new.x, h, tol, ks)
                     if counters.status != OK:
                         counters.bad_time = t0 + done
                         return
@@ -1075,8 +1093,8 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
                 counters.d_viscous += 0.5 * h * (counters.power + p1)
                 counters.power = p1
                 counters.current = w
-                if flags.pulse or flags.base:  # the excitations' work, by the same rule
-                    pe = external_power(flags, params, new, t0 + done + h)
+                if flags[PULSE] or flags[BASE]:  # the excitations' work, by the same rule
+                    pe = external_power(at_run_time(flags), params, new, t0 + done + h)
                     counters.work += 0.5 * h * (counters.ext_power + pe)
                     counters.ext_power = pe
             if ns == 0:
@@ -1085,7 +1103,7 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
                 redo, h = ns, te  # step again, up to the event
                 continue
             tev = t0 + dt if last else t0 + done + te
-            switch_all(flags, params, ns, tev, copies[counters.current], ks)
+            switch_all(at_run_time(flags), params, ns, tev, copies[counters.current], ks)
             counters.substeps += 1
             nsub += 1
             if nsub > MAX_SUBSTEPS:
@@ -1201,20 +1219,22 @@ def _without_refcounts(flags):
 
 
 def _make_advance(flags, nrt: bool):
+    literal = tuple(bool(f) for f in flags)  # typed as literal booleans (see PULSE)
+
     @njit(cache=True)
     def one_segment(params, old, xn, vn, an, closed, seg, s):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
         h, t0, size, real, ints, flag, ev_real, ev_contact = seg
-        r, i = segment_pass(flags, params, old, xn, vn, an, closed,
+        r, i = segment_pass(literal, params, old, xn, vn, an, closed,
                             (h, t0, size, flag, ev_real, ev_contact), s)
         for k in range(5):
             real[s, k] = r[k]
         for k in range(4):
             ints[s, k] = i[k]
 
-    @njit(cache=True, parallel=flags.threaded)
+    @njit(cache=True, parallel=flags[THREADED])
     def run_segments(params, old, new, h, t0, ks):
         """Every segment of a pass (:func:`segment_pass`), on the threads numba has
         (``numba.set_num_threads``) in a threaded variant, in order otherwise, joined by
@@ -1238,11 +1258,11 @@ def _make_advance(flags, nrt: bool):
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
                         (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
-        return merge_segments(flags, params, old, new, h, t0 + h, ks)
+        return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @njit(cache=True, _nrt=nrt)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
-        return advance_frames(flags, named_params(params), Beads(*buffers), named_state(ks),
+        return advance_frames(literal, named_params(params), Beads(*buffers), named_state(ks),
                               FrameBlock(*block), first, nframes, spf, dt, run_segments)
 
     variant_cache(run_segments, flags)
