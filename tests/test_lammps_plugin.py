@@ -195,18 +195,21 @@ def test_plugin_for_another_lammps_is_rebuilt(plugin, monkeypatch, tmp_path):
     assert native_plugin.plugin_path() == path  # built once
 
 
-def test_restart_continues_bitwise(plugin, tmp_path):
+@pytest.mark.parametrize("drive", ["", " pulse 5 6.0 3.0 4.0"])
+def test_restart_continues_bitwise(plugin, tmp_path, drive):
     """The per-atom states (and the global sums) go into restart files: a run continued from
-    one is the uninterrupted run, bit for bit."""
+    one is the uninterrupted run, bit for bit; driven (a pulse on bead 4 from t = 4 to 7,
+    across the restart at t = 5), its external work W and W's rate too."""
+    thermo = "f_contact[1] f_contact[2]" + (" f_contact[4]" if drive else "")
     setup = f"""plugin load {plugin}
 comm_modify vel yes cutoff 6.0
 pair_style none
-fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 walls yes
+fix contact all mdgran/chain law schwarz lambda 0.64 damping 0.013 k1 0.012 walls yes{drive}
 fix substrate mobile spring/self 0.012 x
 fix move mobile nve
 fix line all setforce NULL 0.0 0.0
 timestep 0.0025
-thermo_style custom step f_contact[1] f_contact[2]
+thermo_style custom step {thermo}
 thermo_modify norm no format float %.17g
 """
     (tmp_path / "a.in").write_text("""units lj
@@ -243,4 +246,6 @@ write_dump all custom final.b id x vx modify sort id format float %.17g
     assert np.array_equal(a, b)
     last = [ln.split() for out in outs for ln in out.splitlines()
             if ln.strip().startswith("4000 ")]
-    assert last[0] == last[1]  # D_hysteresis, D_viscous carried over
+    assert last[0] == last[1]  # D_hysteresis, D_viscous (and W) carried over
+    if drive:
+        assert float(last[0][3]) > 1.0  # the pulse did work (J = 2 A T / pi = 11.5)
