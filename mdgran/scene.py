@@ -321,6 +321,12 @@ SCHEMA = {
                       "the samples: displacements u_b (the first 0; a clamped cubic spline "
                       "through them) or accelerations u_b'' (linear between samples, "
                       "integrated from rest at 0)", "needed by a base motion"),
+        "file": Key(None, "str?", "a path to a text file of numbers or a .npy array", "",
+                    "base.values read from a file when the scene is loaded (text: numbers "
+                    "separated by spaces, commas or newlines, '#' starts a comment; or a "
+                    "1-D .npy): a recorded shaker signal.  A relative path is from the scene "
+                    "file's folder (the working directory for a scene given otherwise); the "
+                    "stored scene holds the samples read", "none"),
     },
     "meta": {
         "description": Key("", "str", "a string", "", "what the scene is; first line is listed "
@@ -340,6 +346,7 @@ OTHER_WAYS = {
     "beads.adhesion": ("w",), "beads.w": ("adhesion",),
     "beads.density": ("density_si", "mass"), "beads.density_si": ("density", "mass"),
     "beads.mass": ("density", "density_si"),
+    "base.file": ("values",), "base.values": ("file",),
 }
 
 
@@ -517,9 +524,51 @@ class Scene:
         return dump_toml(self.data)
 
 
-def _make_scene(name: str, raw: dict) -> Scene:
+def _make_scene(name: str, raw: dict, folder: Path | None = None) -> Scene:
+    raw = _read_base_file(raw, folder or Path.cwd())
     data, sources = _resolve(raw)
     return Scene(name, data, given=copy.deepcopy(raw), sources=sources)
+
+
+def _read_base_file(raw: dict, folder: Path) -> dict:
+    """``base.file`` read into ``base.values`` (``raw`` is changed in place; returned), so
+    that the stored scene holds the samples themselves; ``folder``: where a relative path
+    starts."""
+    base = raw.get("base")
+    if not isinstance(base, dict) or base.get("file") is None:
+        return raw
+    given = base.pop("file")
+    if not isinstance(given, str) or not given:
+        raise SceneError("base.file", f"must be a path (a string), not {given!r}")
+    if base.get("values") is not None:
+        raise SceneError("base.file", "give the samples in base.values or in base.file, not both")
+    path = folder / Path(given).expanduser()
+    base["values"] = read_samples(path, "base.file")
+    return raw
+
+
+def read_samples(path: Path, key: str) -> list:
+    """A 1-D series of 2 to 1e6 finite numbers from a text file (numbers separated by
+    spaces, commas or newlines; ``#`` starts a comment) or a ``.npy`` array; anything else
+    raises :class:`SceneError` naming ``key``."""
+    try:
+        if path.suffix == ".npy":
+            values = np.load(path, allow_pickle=False)
+        else:
+            text = "\n".join(ln.split("#", 1)[0] for ln in path.read_text("utf-8").splitlines())
+            values = np.array(text.replace(",", " ").split(), dtype=float)
+    except OSError as exc:
+        raise SceneError(key, f"{path} cannot be read: {exc.strerror or exc}") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise SceneError(key, f"{path} holds something other than numbers: {exc}") from None
+    values = np.asarray(values)
+    if values.ndim != 1 or values.dtype.kind not in "iuf":
+        raise SceneError(key, f"{path} must hold one series of numbers, not an array of "
+                         f"shape {values.shape} and type {values.dtype}")
+    if not 2 <= len(values) <= 1_000_000 or not np.all(np.isfinite(values)):
+        raise SceneError(key, f"{path} must hold 2 to 1e6 finite numbers (it holds "
+                         f"{len(values)}, {int(np.sum(~np.isfinite(values)))} not finite)")
+    return values.astype(float).tolist()
 
 
 def apply_overrides(raw: dict, overrides) -> dict:
@@ -905,7 +954,7 @@ def load_scene(spec, overrides=(), name: str | None = None) -> Scene:
         if not path.suffix == ".toml" or not path.is_file():
             raise SceneError("SCENE", f"{spec!r} is neither a built-in scene ("
                              + ", ".join(scenes) + ") nor a readable .toml file")
-    raw = read_toml(path, "SCENE")
+    raw = _read_base_file(read_toml(path, "SCENE"), path.resolve().parent)
     return _make_scene(name or stem, apply_overrides(raw, overrides))
 
 

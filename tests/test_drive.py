@@ -213,6 +213,70 @@ def test_bad_excitations_are_refused_naming_the_key(keys, key):
     assert exc.value.key == key
 
 
+SHAKEN_TOML = """[chain]
+n = 6
+[substrate]
+k1 = 0.1
+damping = 0.02
+[base]
+kind = "acceleration"
+interval = 0.5
+file = "{file}"
+[run]
+duration = 3.0
+"""
+
+
+def test_base_file_gives_the_samples_of_base_values(tmp_path, monkeypatch):
+    """base.file (text with commas, blanks and comments, or .npy; relative to the scene
+    file's folder wherever the run starts) is read into base.values: the scene, the stored
+    scene text and the run are those of the same samples given inline; an override of
+    base.file (relative to the working directory) replaces the file's samples."""
+    samples = [0.0, 0.4, -0.3, 0.25, 0.0, -0.1]
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    (folder / "shaker.txt").write_text("# t = 0, 0.5, ...\n0.0, 0.4\n\n-0.3 0.25  # peak\n"
+                                       "0.0\n-0.1\n")
+    np.save(folder / "shaker.npy", np.array(samples))
+    (folder / "a.toml").write_text(SHAKEN_TOML.format(file="shaker.txt"))
+    (folder / "b.toml").write_text(SHAKEN_TOML.format(file="shaker.npy"))
+    monkeypatch.chdir(tmp_path)  # elsewhere than the scenes
+    inline = load_scene({"chain": {"n": 6}, "substrate": {"k1": 0.1, "damping": 0.02},
+                         "base": {"kind": "acceleration", "interval": 0.5, "values": samples},
+                         "run": {"duration": 3.0}})
+    for name in ("a.toml", "b.toml"):
+        sc = load_scene(folder / name)
+        assert sc.data["base"]["values"] == samples
+        assert "file" not in sc.to_toml() and "-0.3" in sc.to_toml()
+        assert sc.with_overrides([("run.dt", 0.005)]).data["base"]["values"] == samples
+    a, b = run(load_scene(folder / "a.toml"), "fast"), run(inline, "fast")
+    assert np.array_equal(a.trajectory.x, b.trajectory.x)
+    assert a.trajectory.ledger["external_work"][-1] != 0.0
+    np.save(tmp_path / "other.npy", np.array([0.0, 1.0]))
+    other = load_scene(folder / "a.toml", [("base.file", "other.npy")])
+    assert other.data["base"]["values"] == [0.0, 1.0]
+
+
+@pytest.mark.parametrize("content, reason", [
+    (None, "cannot be read"), ("0.0 1.0 x\n", "other than numbers"), ("0.5\n", "2 to 1e6"),
+    ("0.0 nan 1.0\n", "not finite"), ("2d", "one series"), ("both", "not both"),
+])
+def test_bad_base_files_are_refused_naming_the_key(tmp_path, content, reason):
+    path = tmp_path / ("s.npy" if content == "2d" else "s.txt")
+    if content == "2d":
+        np.save(path, np.zeros((3, 2)))
+    elif content == "both":
+        path.write_text("0.0 1.0\n")
+    elif content is not None:  # None: no file
+        path.write_text(content)
+    base = {"kind": "acceleration", "interval": 0.5, "file": str(path)}
+    if content == "both":
+        base["values"] = [0.0, 1.0]
+    with pytest.raises(SceneError) as exc:
+        load_scene({"chain": {"n": 3}, "substrate": {"k1": 0.1}, "base": base})
+    assert exc.value.key == "base.file" and reason in str(exc.value)
+
+
 #: fixed cases of shaken_chain for LAMMPS (amplitude, duration, base_amp, seed): a long pulse
 #: on a gently shaken base, a short strong pulse on a lightly shaken one; each closes and
 #: opens contacts (one snap-off before t = 5)
