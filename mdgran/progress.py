@@ -105,6 +105,48 @@ def status_word(status: str) -> str:
     return str(status).split(":", 1)[0].strip() or "ended"
 
 
+class CompileNotice:
+    """While active (a context manager), one line on ``stream`` (stderr) when numba starts to
+    compile, for a cache miss only (loading a compiled variant from numba's disk cache is no
+    compilation): a first run of a scene's terms otherwise sits silent for 15-25 s before its
+    first frame.  Uses numba's event API (``numba:compile`` events)."""
+
+    def __init__(self, label: str = "", stream=None):
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.said = False
+        self._listener = None
+
+    def __enter__(self):
+        from numba.core import event
+
+        notice = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                notice.compiling()
+
+            def on_end(self, ev):
+                pass
+
+        self._listener = Listener()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def compiling(self):
+        if not self.said:
+            self.said = True
+            prefix = f"{self.label}: " if self.label else ""
+            print(f"{prefix}compiling the code for this scene's terms (numba; once, about "
+                  "15-25 s, then cached on disk)", file=self.stream, flush=True)
+
+    def __exit__(self, *exc):
+        from numba.core import event
+
+        event.unregister("numba:compile", self._listener)
+        return False
+
+
 class ProgressReporter:
     """A labelled progress bar for one run (a reporter: ``report(frame, ledger)``,
     ``close(status)``).

@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import math
 import os
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
 from .backends import BadSpec, get_backend, parse_spec
 from .backends.base import IntegrationError
 from .checkpoint import CheckpointError
+from .progress import CompileNotice
 from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
 from .run_record import ledger_scale, relative_ledger_error
 from .scene import SceneError
@@ -258,7 +260,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     try:
         # a signal while a frame goes to the reporters is held until all have it, so that a
         # checkpoint (the backend's state at its last frame) matches the frames written
-        with FrameSections() as sections:
+        notice = CompileNotice(f"{scene.name} [{b.name}]") if progress else nullcontext()
+        with notice, FrameSections() as sections:
             for frame in (b.frames(resume=start) if start is not None else b.frames()):
                 sections.inside = True
                 led = frame.ledger(model)  # from the frame's block, if the backend made one

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from mdgran.progress import ProgressReporter, RunSeries, Terminal, fmt_seconds
+from mdgran.progress import (CompileNotice, ProgressReporter, RunSeries, Terminal,
+                             fmt_seconds)
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 
@@ -154,3 +155,64 @@ def test_sweep_names_running_cases_while_they_run(tmp_path):
                     running[0])
     assert lines[-1].startswith("sweep slow: 2/2 cases done in ")
     assert not list((tmp_path / "sw" / "cases").glob("*.progress"))
+
+
+CACHED_MODULE = """
+from numba import njit
+
+@njit(cache=True)
+def twice(x):
+    return 2 * x
+"""
+
+NOTICE_CHILD = """
+import io, sys
+sys.path.insert(0, sys.argv[1])
+from mdgran.progress import CompileNotice
+import cached_twice
+out = io.StringIO()
+with CompileNotice("scene [fast]", stream=out):
+    cached_twice.twice(3)
+print(repr(out.getvalue()))
+"""
+
+
+def test_compile_notice_speaks_once_when_numba_compiles_and_not_on_a_cache_load(tmp_path):
+    """The line a first run shows while numba compiles: once for nested compilations, not for
+    functions compiled already, not once the notice is closed, and not when the compiled code
+    comes from numba's disk cache (a second process)."""
+    import os
+    import subprocess
+    import sys
+
+    from numba import njit
+
+    @njit
+    def inner(x):
+        return x + 1
+
+    @njit
+    def outer(x):
+        return inner(x) * 2
+
+    out = io.StringIO()
+    with CompileNotice("scene [fast]", stream=out):
+        outer(1), outer(2)
+    assert out.getvalue().count("compiling") == 1 and out.getvalue().startswith("scene [fast]: ")
+    again = io.StringIO()
+    with CompileNotice(stream=again):
+        outer(3)
+    assert again.getvalue() == ""
+
+    @njit
+    def later(x):
+        return x
+    later(1)  # after the notice closed: no listener left to speak
+    assert again.getvalue() == "" and out.getvalue().count("compiling") == 1
+
+    (tmp_path / "cached_twice.py").write_text(CACHED_MODULE)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    said = [subprocess.run([sys.executable, "-c", NOTICE_CHILD, str(tmp_path)], env=env,
+                           capture_output=True, text=True, check=True).stdout.strip()
+            for _ in range(2)]
+    assert "compiling" in said[0] and said[1] == "''"
