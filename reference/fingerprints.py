@@ -6,8 +6,10 @@ SIMD kernels at run time (AVX2 here, AVX-512 elsewhere) and those round differen
 last bit, which a chaotic chain amplifies.  This script records, for four scenes on the
 reference and fast backends, the SHA-256 of the displacement, velocity and event arrays,
 together with the package versions (those of ``constraints.txt``) and NumPy's CPU dispatch.
-``tests/test_determinism.py`` compares against it where both match, and skips with the reason
-elsewhere.
+The file holds one entry per platform it was run on (``platforms``: the pinned versions on
+each kind of CPU dispatch met so far); running the script replaces this platform's entry and
+drops the entries of other package versions.  ``tests/test_determinism.py`` compares against
+the entry of its platform, and skips with the reason where there is none.
 
     python reference/fingerprints.py
 """
@@ -57,10 +59,19 @@ def all_fingerprints() -> dict:
             for b in BACKENDS}
 
 
+def entry_for(platforms: list, platform: dict) -> dict | None:
+    """The recorded entry of ``platform`` (package versions and NumPy dispatch), or None."""
+    return next((e for e in platforms if e["platform"] == platform), None)
+
+
 def main() -> int:
-    OUT.write_text(json.dumps({"platform": platform_key(), "runs": all_fingerprints()},
-                              indent=1) + "\n")
-    print(f"wrote {OUT}", file=sys.stderr)
+    here = platform_key()
+    old = json.loads(OUT.read_text())["platforms"] if OUT.exists() else []
+    keep = [e for e in old if e["platform"]["packages"] == here["packages"]
+            and e["platform"] != here]
+    entries = keep + [{"platform": here, "runs": all_fingerprints()}]
+    OUT.write_text(json.dumps({"platforms": entries}, indent=1) + "\n")
+    print(f"wrote {OUT} ({len(entries)} platforms)", file=sys.stderr)
     return 0
 
 
