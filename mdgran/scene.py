@@ -524,8 +524,8 @@ class Scene:
         return dump_toml(self.data)
 
 
-def _make_scene(name: str, raw: dict, folder: Path | None = None) -> Scene:
-    raw = _read_base_file(raw, folder or Path.cwd())
+def _make_scene(name: str, raw: dict) -> Scene:
+    raw = _read_base_file(raw, Path.cwd())  # a scene file's own base.file is read already
     data, sources = _resolve(raw)
     return Scene(name, data, given=copy.deepcopy(raw), sources=sources)
 
@@ -561,7 +561,6 @@ def read_samples(path: Path, key: str) -> list:
         raise SceneError(key, f"{path} cannot be read: {exc.strerror or exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise SceneError(key, f"{path} holds something other than numbers: {exc}") from None
-    values = np.asarray(values)
     if values.ndim != 1 or values.dtype.kind not in "iuf":
         raise SceneError(key, f"{path} must hold one series of numbers, not an array of "
                          f"shape {values.shape} and type {values.dtype}")

@@ -167,3 +167,10 @@ def test_loop_runs_without_reference_counting(monkeypatch):
     del fk._KERNELS[flags]
     assert fk.get_kernel(flags)(1, 2, 3) == 6 and built == [False, True]
     assert fk._KERNELS[flags](4, 5) == 9
+
+
+def test_flag_indices_name_the_fields_of_flags():
+    """The kernel reads a variant's flags by index (``flags[PULSE]``, a tuple of literal
+    booleans); each index constant is its field's position in :class:`Flags`."""
+    for k, name in enumerate(fk.Flags._fields):
+        assert getattr(fk, name.upper()) == k, name

@@ -126,7 +126,8 @@ class Flags(NamedTuple):
 
 #: Index of each flag in a variant's flags (``flags[PULSE]``): inside a variant they are a
 #: tuple of literal booleans, so that each function taking them is compiled for the variant.
-(WALLS, DAMPED, K1_ON, K3_ON, LOCATE, EXACT, HERTZ, MIXED, SUB_DAMPED, OFF_SUBSTRATE, THREADED, PULSE, BASE) = range(13)
+(WALLS, DAMPED, K1_ON, K3_ON, LOCATE, EXACT, HERTZ, MIXED, SUB_DAMPED, OFF_SUBSTRATE, THREADED,
+ PULSE, BASE) = range(len(Flags._fields))
 
 
 class ForceTable(NamedTuple):
@@ -1219,7 +1220,7 @@ def _without_refcounts(flags):
 
 
 def _make_advance(flags, nrt: bool):
-    literal = tuple(bool(f) for f in flags)  # typed as literal booleans (see PULSE)
+    literal = tuple(flags)  # typed as literal booleans (see PULSE)
 
     @njit(cache=True)
     def one_segment(params, old, xn, vn, an, closed, seg, s):
@@ -1234,7 +1235,7 @@ def _make_advance(flags, nrt: bool):
         for k in range(4):
             ints[s, k] = i[k]
 
-    @njit(cache=True, parallel=flags[THREADED])
+    @njit(cache=True, parallel=flags.threaded)
     def run_segments(params, old, new, h, t0, ks):
         """Every segment of a pass (:func:`segment_pass`), on the threads numba has
         (``numba.set_num_threads``) in a threaded variant, in order otherwise, joined by
