@@ -95,7 +95,7 @@ def test_sigkill_then_resume_matches_uninterrupted_run(tmp_path):
                 with h5py.File(tmp_path / "k.h5.partial", "r", locking=False) as f:
                     ready = "checkpoint" in f and json.loads(
                         f["checkpoint"].attrs["meta"])["scalars"]["i_out"] > 0
-            except (OSError, KeyError, ValueError):
+            except (OSError, RuntimeError, KeyError, ValueError):  # read while being written
                 ready = False
             if ready:
                 break
