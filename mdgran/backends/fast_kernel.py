@@ -1219,10 +1219,30 @@ def _without_refcounts(flags):
     return advance
 
 
+def variant_jit(tag: str, **options):
+    """``njit(**options)`` of a variant's closure under a name of its own (``tag`` appended).
+
+    numba names a compiled function by its qualified name, its argument types and a counter
+    of the process that compiled it; the variant's flags reach ``one_segment`` and
+    ``run_segments`` through the closure, not as an argument.  Two variants compiled by two
+    processes with the same counter then had the same symbol, and a process that loaded
+    both from the disk cache linked the second variant's ``advance`` to the first one's
+    ``run_segments``: the other variant's physics, or a segmentation fault when it read
+    arrays this one leaves empty (chains of more than SEGMENT contacts, whose pass runs
+    through ``run_segments``)."""
+    def compile_as_variant(fn):
+        fn.__name__ = f"{fn.__name__}_{tag}"
+        fn.__qualname__ = f"{fn.__qualname__}_{tag}"
+        return njit(**options)(fn)
+
+    return compile_as_variant
+
+
 def _make_advance(flags, nrt: bool):
     literal = tuple(flags)  # typed as literal booleans (see PULSE)
+    tag = "".join("1" if f else "0" for f in flags)  # the variant's own names (variant_jit)
 
-    @njit(cache=True)
+    @variant_jit(tag, cache=True)
     def one_segment(params, old, xn, vn, an, closed, seg, s):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
@@ -1235,7 +1255,7 @@ def _make_advance(flags, nrt: bool):
         for k in range(4):
             ints[s, k] = i[k]
 
-    @njit(cache=True, parallel=flags.threaded)
+    @variant_jit(tag, cache=True, parallel=flags.threaded)
     def run_segments(params, old, new, h, t0, ks):
         """Every segment of a pass (:func:`segment_pass`), on the threads numba has
         (``numba.set_num_threads``) in a threaded variant, in order otherwise, joined by
@@ -1261,7 +1281,7 @@ def _make_advance(flags, nrt: bool):
                         (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
-    @njit(cache=True, _nrt=nrt)
+    @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
         return advance_frames(literal, named_params(params), Beads(*buffers), named_state(ks),
                               FrameBlock(*block), first, nframes, spf, dt, run_segments)

@@ -1,0 +1,54 @@
+"""Two compiled fast-kernel variants in one process, both loaded from numba's disk cache.
+
+numba names a compiled function by its qualified name, argument types and a counter of the
+process that compiled it.  The variants' closures (``run_segments``, ``one_segment``) once had
+the same name in every variant, so two variants compiled by two processes whose counters
+agreed (each loading the shared functions from the cache, then compiling its own closures)
+had the same symbols; a third process loading both linked the second variant to the first
+one's pass: a dimer chain ran with the homogeneous chain's physics, and the homogeneous chain
+after a dimer crashed (segmentation fault).  The run here reproduces that history in a cache
+folder of its own and checks that each chain's result is the one it has alone.
+"""
+import json
+import os
+import subprocess
+import sys
+
+N = 2101  # more contacts than fast_kernel.SEGMENT: the pass runs through run_segments
+
+CHILD = r"""
+import json, sys
+import numpy as np
+from mdgran import run
+from mdgran.scene import load_scene
+N = int(sys.argv[1])
+CASES = {"warm": ("collision-pair", []),
+         "homogeneous": ("micro-star", [("chain.n", N)]),
+         "dimer": ("micro-star", [("chain.n", N), ("beads.pattern", "dimer"),
+                                  ("beads.ratio", 0.6)])}
+out = {}
+for case in sys.argv[2:]:
+    name, over = CASES[case]
+    sc = load_scene(name, over + [("run.duration", 2.0), ("run.output_interval", 1.0),
+                                  ("run.threads", 1)])
+    x = run(sc, "fast").trajectory.x[-1]
+    out[case] = [float(np.abs(x).sum()), float(x[len(x) // 2])]
+print(json.dumps(out))
+"""
+
+
+def _run(cache, *cases):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    res = subprocess.run([sys.executable, "-c", CHILD, str(N), *cases], env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, f"{cases}: exit {res.returncode}: {res.stderr[-400:]}"
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_variants_from_the_cache_keep_their_own_physics(tmp_path):
+    cache = tmp_path / "numba-cache"
+    _run(cache, "warm")  # the shared functions compiled: the next two compile alike
+    alone = {**_run(cache, "homogeneous"), **_run(cache, "dimer")}
+    assert alone["homogeneous"] != alone["dimer"]
+    for order in [("homogeneous", "dimer"), ("dimer", "homogeneous")]:
+        assert _run(cache, *order) == {k: alone[k] for k in order}, order
