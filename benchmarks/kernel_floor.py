@@ -48,6 +48,14 @@ BEAD_STEPS = 2e7  # per timed repeat
 REPEATS = 7
 SIZES = (10_000, 100_000, 1_000_000)
 LAWS = {"table": "micro-star", "hertz": "macro-hertz"}
+#: --mixed: micro-star's homogeneous chain beside two of unlike beads (as
+#: benchmarks/mixed_cost.py: a dimer of diameter ratio 0.6, N + 1 beads so that big beads
+#: touch both walls; every second bead of density 0.3), C and numba alike
+MIXED = {"table": ("micro-star", lambda n: [("chain.n", n)]),
+         "dimer": ("micro-star", lambda n: [("chain.n", n + 1), ("beads.pattern", "dimer"),
+                                            ("beads.ratio", 0.6)]),
+         "density": ("micro-star", lambda n: [("beads.density",
+                                               [1.0, 0.3] * (n // 2) + [1.0] * (n % 2))])}
 CHECK_STEPS = 1000
 DT = 0.0025
 #: build name -> cc flags
@@ -89,12 +97,14 @@ def dump_state(b, path: Path) -> None:
     """The backend's current state and constants in the C floor's input format: int64
     ``n, m, walls, damped, k1_on, hertz, rows``; float64 ``h, gap, c, k1, delta_off,
     delta_max, mean_force_below, base, scale, last, step, power``; the table ``[rows, 4]``;
-    ``x, v, a`` ``[n]``; ``closed`` ``[m]`` uint8."""
+    ``x, v, a`` ``[n]``; ``closed`` ``[m]`` uint8; for unlike beads (flags.mixed) a trailer:
+    int64 ``kinds, coefficients``, ``Mix.kind`` ``[m]`` uint32, ``Mix.pair``, ``Mix.coef``."""
+    from mdgran.backends import fast_kernel as fk
     p, f, t = b.params, b.flags, b.params.table
     if f.exact or f.k3_on or not f.locate:
         raise ValueError("the C floor has the table or Hertz law, no k3, located events")
     now = b._current()
-    coef = np.ascontiguousarray(t.coef, dtype=np.float64)
+    coef = np.ascontiguousarray(t.coef, dtype=np.float64).reshape(-1, 4)
     ints = np.array([len(now.x), len(b.closed), f.walls, f.damped, f.k1_on, f.hertz,
                      coef.shape[0]], dtype=np.int64)
     dbl = np.array([b.dt, p.gap, p.damping, p.k1, p.delta_off, p.delta_max,
@@ -103,6 +113,11 @@ def dump_state(b, path: Path) -> None:
     with open(path, "wb") as fh:
         for arr in (ints, dbl, coef, now.x, now.v, now.a, b.closed.astype(np.uint8)):
             fh.write(np.ascontiguousarray(arr).tobytes())
+        if f.mixed:
+            mix = p.mix
+            for arr in (np.array([len(mix.pair) // fk.NPAIR, len(mix.coef)], dtype=np.int64),
+                        mix.kind.astype(np.uint32), mix.pair, mix.coef):
+                fh.write(np.ascontiguousarray(arr).tobytes())
 
 
 def run_c(exe: Path, state: Path, steps: int, repeats: int, out: Path | None = None) -> dict:
@@ -118,17 +133,20 @@ def read_c_state(path: Path, n: int):
     return raw[:n], raw[n:2 * n], raw[2 * n:3 * n], raw[3 * n], raw[3 * n + 1]
 
 
-def check(exe: Path, tmp: Path) -> dict:
+def check(exe: Path, tmp: Path, cases=None) -> dict:
     """C against numba: CHECK_STEPS steps of 20-bead chains with a gentle impulse on bead 10
-    (no events, no flags); the largest differences of the end states."""
+    (no events, no flags); the largest differences of the end states.  ``cases``: law ->
+    scene name, or (scene name, overrides of N) as MIXED's."""
     out = {}
-    for law, name in LAWS.items():
+    for law, name in (cases or LAWS).items():
+        name, over = (name, lambda n: []) if isinstance(name, str) else name
         b, gen = backend(name, 20, CHECK_STEPS, 1,
-                         [("impulse.bead", 10), ("impulse.velocity", 0.05)])
+                         [("impulse.bead", 10), ("impulse.velocity", 0.05), *over(20)])
+        n = len(b._current().x)
         dump_state(b, tmp / "check.bin")
         c = run_c(exe, tmp / "check.bin", CHECK_STEPS, 1, tmp / "check.out")
         frame = next(gen)
-        x, v, a, d_visc, power = read_c_state(tmp / "check.out", 20)
+        x, v, a, d_visc, power = read_c_state(tmp / "check.out", n)
         now = b._current()
         out[law] = {"steps": CHECK_STEPS, "events": len(frame.events),
                     "flagged_c": c["flagged"], "kicks_c": c["kicks"],
@@ -184,20 +202,22 @@ def busy_processes(threshold: float = 20.0) -> list:
 
 
 def measure(exes: dict, sizes, repeats: int, bead_steps: float, tmp: Path,
-            threads=(1,)) -> dict:
+            threads=(1,), cases=None) -> dict:
     """Per law and N: the C builds (one thread) and the numba kernel on each thread count
-    of ``threads`` (wall time of the kernel calls; ``cpu`` is the process's, all threads)."""
+    of ``threads`` (wall time of the kernel calls; ``cpu`` is the process's, all threads).
+    ``cases`` as :func:`check`'s."""
     out = {}
-    for law, name in LAWS.items():
+    for law, name in (cases or LAWS).items():
+        name, over = (name, lambda n: []) if isinstance(name, str) else name
         for n in sizes:
             steps = steps_for(n, bead_steps)
             load0, busy0 = os.getloadavg(), busy_processes()
-            b, gen = backend(name, n, steps, repeats + 2)
+            b, gen = backend(name, n, steps, repeats + 2, over(n))
             c = c_floor(exes, b, n, steps, repeats, tmp)
             del b, gen
             nb = {}
             for t in threads:
-                b, gen = backend(name, n, steps, repeats + 2, threads=t)
+                b, gen = backend(name, n, steps, repeats + 2, over(n), threads=t)
                 nb[str(t)] = time_numba(b, gen, n, steps, repeats)
                 nb[str(t)]["threads_used"] = b.stats.get("threads", 1)
                 del b, gen
@@ -236,7 +256,10 @@ def main(argv=None) -> None:
     ap.add_argument("--threads", type=int, nargs="+", default=[1],
                     help="thread counts of the numba kernel (run.threads), e.g. 1 2")
     ap.add_argument("--sizes", type=int, nargs="+", default=None)
+    ap.add_argument("--mixed", action="store_true",
+                    help="micro-star beside a dimer and a two-density chain (MIXED)")
     args = ap.parse_args(argv)
+    cases = MIXED if args.mixed else LAWS
     sizes, repeats, bead_steps = ((10_000, 100_000), 3, 5e6) if args.quick else \
         (SIZES, REPEATS, BEAD_STEPS)
     with tempfile.TemporaryDirectory() as td:
@@ -248,10 +271,11 @@ def main(argv=None) -> None:
                   "cc": cc.splitlines()[0], "builds": {k: " ".join(v) for k, v in BUILDS.items()},
                   "python": sys.version.split()[0], "mdgran": mdgran_source(),
                   "load_at_start": os.getloadavg(),
-                  "check": check(exes["O2"], tmp),
+                  "cases": {k: v if isinstance(v, str) else v[0] for k, v in cases.items()},
+                  "check": check(exes["O2"], tmp, cases),
                   "busy_at_start": busy_processes(),
                   "ns_per_bead_step": measure(exes, args.sizes or sizes, repeats, bead_steps,
-                                              tmp, args.threads),
+                                              tmp, args.threads, cases),
                   "load_at_end": os.getloadavg()}
     args.out.parent.mkdir(exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")

@@ -402,3 +402,30 @@ def test_walled_mixture_whose_contacts_open_at_touch():
     with pytest.raises(SceneError) as exc:
         model_from_scene(dmt).initial_state(1, 0.5)
     assert exc.value.key == "beads"
+
+
+@pytest.mark.parametrize("name, overrides, kinds", [
+    ("mixed/dimer", [], 3),  # the wall pair (either end), the unlike pair with each left bead
+    ("mixed/tapered", [], None),  # every contact its own
+    ("mixed/striker", [], 2),  # the striker on bead 2; the chain
+    ("micro-star", [("beads.density", [1.0, 0.3] * 10)], 2)])
+def test_fast_contact_kinds_hold_each_contacts_constants(name, overrides, kinds):
+    """The fast kernel's contact kinds (one row of constants per distinct contact, with its
+    left bead): row kind[j] gives back contact j's A, L, opening threshold and law class and
+    its left bead's mass and substrate factor from the mixture itself."""
+    from mdgran.backends import fast_kernel as fk
+    from mdgran.backends.fast import FastBackend
+    sc = load_scene(name, overrides)
+    mix = model_from_scene(sc).mixture
+    kmix = FastBackend(sc).params.mix
+    row = kmix.pair.reshape(-1, fk.NPAIR)[kmix.kind]
+    m = len(mix.force_scale)
+    assert len(kmix.pair) == fk.NPAIR * (kinds or m)
+    left = np.arange(m) - (1 if model_from_scene(sc).walls else 0)
+    inner = left >= 0
+    for field, expected in [("force_scale", mix.force_scale), ("length", mix.length_scale),
+                            ("delta_off", mix.delta_off)]:
+        assert np.array_equal(row[:, fk.PAIR_FIELDS.index(field)], expected)
+    assert np.array_equal(kmix.pair_class[kmix.kind], mix.law_index)
+    assert np.array_equal(row[inner, fk.P_INV_MASS], 1.0 / mix.mass[left[inner]])
+    assert np.array_equal(row[inner, fk.P_ON_SITE], mix.substrate[left[inner]])

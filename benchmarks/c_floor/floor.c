@@ -37,6 +37,14 @@ typedef struct {
 
 static const double *COEF; /* [rows][4], highest power first */
 
+/* Unlike beads (the kernel's flags.mixed, mdgran.backends.fast_kernel.Mix): contact j is of
+ * kind KIND[j], whose row PAIR + NPAIR * KIND[j] holds its constants (fields P_* as the
+ * kernel's PAIR_FIELDS), its class's cubics in MCOEF from row[P_FIRST] on. */
+enum { P_SCALE, P_INV_LEN, P_LEN, P_OFF, P_BASE, P_WSCALE, P_STEP, P_BELOW, P_FIRST,
+       P_INV_MASS, P_ON_SITE, NPAIR };
+static const uint32_t *KIND;
+static const double *PAIR, *MCOEF;
+
 /* The table force at table coordinate w (0 <= w < last): Horner on the cubic of floor(w). */
 static inline double spline(double w, double step) {
     int64_t i = (int64_t)w;
@@ -123,6 +131,70 @@ static inline __attribute__((always_inline)) double pass_of(
         nw.x[n - 1] = x_c;
         nw.a[n - 1] = a;
         nw.v[n - 1] = vh_c + hh * av;
+    }
+    cnt->flagged += nflag;
+    cnt->kicks += kicks;
+    cnt->out_of_table += bad;
+    return power;
+}
+
+
+/* pass_of for unlike beads, as the kernel's mixed variant (walls, table law, damping, k1):
+ * the contact's row read through its kind, its own units u = delta / L, F = A f(u), the
+ * mean-force test in its class's band, the left bead's acceleration times its 1 / m. */
+static double pass_mixed(const Header *P, const uint8_t *closed, Buf o, Buf nw, double h,
+                         Counts *cnt) {
+    const int64_t n = P->n, m = P->m;
+    const double hh = 0.5 * h, gap = P->gap, c = P->c, k1 = P->k1, last = P->last;
+    double power = 0.0, x_c = 0.0, vh_c = 0.0, ve_c = 0.0, f_l = 0.0, fv_l = 0.0;
+    int64_t nflag = 0, kicks = 0, bad = 0;
+    for (int64_t j = 0; j < m; j++) {
+        int64_t rb = j;
+        double x_r = 0.0, vh_r = 0.0, ve_r = 0.0;
+        if (rb < n) {
+            double a_r = o.a[rb];
+            vh_r = o.v[rb] + hh * a_r;
+            x_r = o.x[rb] + h * vh_r;
+            ve_r = vh_r + hh * a_r;
+        }
+        double d = x_c - x_r - gap;
+        double r = ve_c - ve_r;
+        const double *row = PAIR + (uint64_t)NPAIR * KIND[j];
+        double doff = row[P_OFF], im = row[P_INV_MASS];
+        double f_r = 0.0, fv_r = 0.0, g, gd;
+        if (closed[j]) {
+            double u = d * row[P_INV_LEN] - row[P_BASE];
+            if (u < 0.0) u = 0.0;
+            double w = sqrt(u) * row[P_WSCALE];
+            if (w < last) {
+                int64_t i = (int64_t)w;
+                double x = (w - (double)i) * row[P_STEP];
+                const double *cf = MCOEF + (uint64_t)row[P_FIRST] + 4 * i;
+                f_r = row[P_SCALE] * (((cf[0] * x + cf[1]) * x + cf[2]) * x + cf[3]);
+            } else
+                bad++;
+            fv_r = f_r;
+            if (d * row[P_INV_LEN] < row[P_BELOW]) kicks++;
+            f_r += c * r;
+            fv_r += c * r;
+            power += c * r * r;
+            g = d - doff;
+            gd = r;
+        } else {
+            g = -d;
+            gd = -r;
+        }
+        if (g < 0.0 || g < 0.5 * h * gd) nflag++;
+        if (rb >= 1) {
+            double a = f_l - f_r, av = fv_l - fv_r;
+            a -= k1 * x_c;
+            av -= k1 * x_c;
+            nw.x[rb - 1] = x_c;
+            nw.a[rb - 1] = a * im;
+            nw.v[rb - 1] = vh_c + hh * (av * im);
+        }
+        x_c = x_r, vh_c = vh_r, ve_c = ve_r;
+        f_l = f_r, fv_l = fv_r;
     }
     cnt->flagged += nflag;
     cnt->kicks += kicks;
@@ -224,6 +296,7 @@ static double pass_blocked(const Header *P, const uint8_t *closed, Buf o, Buf nw
 static int BLOCKED = 0;
 static double pass(const Header *P, const uint8_t *closed, Buf o, Buf nw, double h, Counts *cnt) {
     if (BLOCKED) return pass_blocked(P, closed, o, nw, h, cnt);
+    if (KIND) return pass_mixed(P, closed, o, nw, h, cnt);
     if (P->damped && P->k1_on) {
         if (P->walls)
             return P->hertz ? pass_of(P, closed, o, nw, h, cnt, 1, 1, 1, 1)
@@ -273,6 +346,20 @@ int main(int argc, char **argv) {
     read_all(f, b[0].a, sizeof(double), n);
     uint8_t *closed = malloc(m);
     read_all(f, closed, 1, m);
+    int64_t kinds_rows[2]; /* optional trailer (unlike beads): kinds, coefficients */
+    if (fread(kinds_rows, sizeof(int64_t), 2, f) == 2) {
+        uint32_t *kind = malloc(sizeof(uint32_t) * m);
+        double *pair = malloc(sizeof(double) * NPAIR * kinds_rows[0]);
+        double *mcoef = malloc(sizeof(double) * kinds_rows[1]);
+        read_all(f, kind, sizeof(uint32_t), m);
+        read_all(f, pair, sizeof(double), NPAIR * kinds_rows[0]);
+        read_all(f, mcoef, sizeof(double), kinds_rows[1]);
+        KIND = kind, PAIR = pair, MCOEF = mcoef;
+        if (!P.walls || P.hertz || !P.damped || !P.k1_on) {
+            fprintf(stderr, "floor: the mixed pass is for walls, table law, damping, k1\n");
+            return 2;
+        }
+    }
     fclose(f);
     memcpy(b[1].x, b[0].x, sizeof(double) * 3 * n); /* touch the second buffer */
     const long steps = atol(argv[2]), repeats = atol(argv[3]);

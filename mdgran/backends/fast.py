@@ -136,7 +136,7 @@ class FastBackend(Backend):
         m = self.model
         law = m.law
         self.table, table_error = contact_table(law, table_points, float(delta_max))
-        table = fk.ForceTable(np.ascontiguousarray(self.table.f_coef, dtype=float),
+        table = fk.ForceTable(np.ascontiguousarray(self.table.f_coef, dtype=float).ravel(),
                               float(self.table.base), float(self.table._scale),
                               float(self.table.n - 1), float(self.table._h))
         singular = law.kind == "schwarz" and law.snap_off == "displacement" and law.t_min > 0.0
@@ -168,7 +168,10 @@ class FastBackend(Backend):
     def _mix(self, points: int, delta_max: float, exact: bool) -> fk.Mix:
         """The kernel's :class:`~mdgran.backends.fast_kernel.Mix` of the scene's unlike beads:
         a force table of ``points`` nodes to ``delta_max`` (own units) per distinct law (one
-        placeholder with the exact law, which needs only each law's constants)."""
+        placeholder with the exact law, which needs only each law's constants), and a row of
+        constants per kind of contact (contacts, with their left beads, that have the same
+        constants share one: a dimer chain has three, a chain of random sizes one per
+        contact)."""
         mix = self.model.mixture
         laws = mix.laws
         if len(laws) > MAX_LAW_TABLES and not exact:
@@ -178,21 +181,32 @@ class FastBackend(Backend):
                              "('fast:contact_eval=exact'), or give contact.fc (one law)")
         tables = [ContactTable(law, points, delta_max)
                   for law in (laws if not exact else laws[:1])]
-        length = np.ascontiguousarray(mix.length_scale, dtype=float)
+        cls = np.asarray(mix.law_index, dtype=np.int64)
+        table = [tables[c if not exact else 0] for c in cls]  # (exact: never read)
+        below = np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
+                          and law.snap_off == "displacement" and law.t_min > 0.0
+                          else -math.inf for law in laws])
+        inv_mass = 1.0 / np.asarray(mix.mass, dtype=float)
+        on_site = np.ascontiguousarray(mix.substrate, dtype=float)
+        left = np.arange(len(cls)) - (1 if self.model.walls else 0)  # -1: the wall
+        length = np.asarray(mix.length_scale, dtype=float)
+        columns = {"force_scale": mix.force_scale, "inv_len": 1.0 / length, "length": length,
+                   "delta_off": mix.delta_off, "base": [t.base for t in table],
+                   "scale": [t._scale for t in table], "step": [t._h for t in table],
+                   "below": below[cls],
+                   "first_coef": tables[0].f_coef.size * (cls if not exact else 0 * cls),
+                   "left_inv_mass": np.where(left >= 0, inv_mass[np.maximum(left, 0)], 1.0),
+                   "left_on_site": np.where(left >= 0, on_site[np.maximum(left, 0)], 1.0)}
+        rows = np.column_stack([np.asarray(columns[f], dtype=float) for f in fk.PAIR_FIELDS]
+                               + [cls.astype(float)])
+        kinds, kind = np.unique(rows, axis=0, return_inverse=True)
         return fk.Mix(
-            inv_mass=1.0 / mix.mass, on_site=np.ascontiguousarray(mix.substrate, dtype=float),
-            force_scale=np.ascontiguousarray(mix.force_scale, dtype=float),
-            inv_len=1.0 / length, length=length,
-            delta_off=np.ascontiguousarray(mix.delta_off, dtype=float),
-            cls=np.ascontiguousarray(mix.law_index, dtype=np.uint32),
-            below=np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
-                            and law.snap_off == "displacement" and law.t_min > 0.0
-                            else -math.inf for law in laws]),
+            inv_mass=inv_mass, on_site=on_site,
+            kind=np.ascontiguousarray(kind.reshape(-1), dtype=np.uint32),
+            pair=np.ascontiguousarray(kinds[:, :-1]).ravel(),
+            pair_class=np.ascontiguousarray(kinds[:, -1], dtype=np.uint32),
             laws=np.array([tuple(schwarz_constants(law)) for law in laws], dtype=float),
-            coef=np.ascontiguousarray(np.stack([t.f_coef for t in tables]), dtype=float),
-            base=np.array([t.base for t in tables], dtype=float),
-            scale=np.array([t._scale for t in tables], dtype=float),
-            step=np.array([t._h for t in tables], dtype=float))
+            coef=np.concatenate([np.ravel(t.f_coef) for t in tables]).astype(float))
 
     # ---- state ----------------------------------------------------------------------------
     def _alloc(self):

@@ -105,6 +105,10 @@ SING_BAND = 0.1
 SEGMENT = 2048
 
 
+#: Unsigned offsets into the flat coefficient arrays (an int64 added to a uint64 is a float64).
+U1, U2, U3, U4 = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)
+
+
 # ---- the kernel's records -----------------------------------------------------------------
 class Flags(NamedTuple):
     """Which terms a compiled variant has (compile-time constants of :func:`get_kernel`)."""
@@ -132,10 +136,11 @@ class Flags(NamedTuple):
 
 class ForceTable(NamedTuple):
     """The force table of :class:`mdgran.contact.ContactTable`: the cubic of interval ``i``
-    in ``w = sqrt(delta - base)`` has coefficients ``coef[i]`` (highest power first) in
+    in ``w = sqrt(delta - base)`` has coefficients ``coef[4 i: 4 i + 4]`` (highest power
+    first; one flat array, so that the index needs no stride from memory) in
     ``w - w_i``; ``w / step`` is the interval coordinate, ``scale = 1 / step``."""
 
-    coef: np.ndarray  # [n - 1, 4]
+    coef: np.ndarray  # [4 (n - 1)]
     base: float  # delta at w = 0 (delta_min; 0 for Hertz)
     scale: float  # 1 / step
     last: float  # n - 1: table coordinates at and beyond it are outside the table
@@ -143,34 +148,48 @@ class ForceTable(NamedTuple):
 
 
 class Mix(NamedTuple):
-    """A chain of unlike beads (:class:`mdgran.mixture.Mixture`; empty arrays otherwise):
-    contact ``j`` has the law of class ``cls[j]`` in its own units, scaled as
-    ``F = force_scale[j] f(delta / L_j)``, ``V = force_scale[j] L_j V(delta / L_j)``; bead
-    ``i`` has mass ``1 / inv_mass[i]`` and substrate factor ``on_site[i]`` (0 or 1).  Each
-    class has a force table (rows of ``coef``, ``base``, ``scale``, ``step``, as
-    :class:`ForceTable`'s, with the same number of nodes) and its Schwarz constants (a row of
-    ``laws``, :class:`~mdgran.contact_scalar.SchwarzConstants`' fields)."""
+    """A chain of unlike beads (:class:`mdgran.mixture.Mixture`; empty arrays otherwise).
+
+    Contact ``j`` is of kind ``kind[j]``: row ``k`` of ``pair`` (``pair[k * NPAIR + P_*]``, a
+    flat array: its index needs no stride from memory) and a law class ``pair_class[k]``.  It
+    has its class's law in its own units, scaled as ``F = A f(delta / L)``,
+    ``V = A L V(delta / L)``.  Each class has a force table (its cubics in ``coef``, from the
+    row's ``P_FIRST`` on, as :class:`ForceTable`'s; its ``base``, ``scale``, ``step`` copied
+    into each row of the class) and its Schwarz constants (a row of ``laws``,
+    :class:`~mdgran.contact_scalar.SchwarzConstants`' fields).  A row also holds the mass and
+    substrate factor of the contact's left bead, which the pass finishes at that contact, so
+    that the pass reads one small array per contact (``kind``) and a few rows, which stay in
+    cache, where per-contact arrays of every constant would be five streams from memory
+    (a chain whose contacts all differ has as many rows as contacts).  Bead ``i`` has mass
+    ``1 / inv_mass[i]`` and substrate factor ``on_site[i]`` (0 or 1): the rare paths read
+    those."""
 
     inv_mass: np.ndarray  # [n]
     on_site: np.ndarray  # [n]
-    force_scale: np.ndarray  # [m] A
-    inv_len: np.ndarray  # [m] 1 / L
-    length: np.ndarray  # [m] L
-    delta_off: np.ndarray  # [m] L * delta_off of the class (units p)
-    cls: np.ndarray  # [m] uint32: the contact's law class
-    below: np.ndarray  # [classes] own delta_min + SING_BAND, or -inf (no mean-force kick)
+    kind: np.ndarray  # [m] uint32: the contact's row of pair
+    pair: np.ndarray  # [kinds * NPAIR]
+    pair_class: np.ndarray  # [kinds] uint32: the kind's law class
     laws: np.ndarray  # [classes, 5]
-    coef: np.ndarray  # [classes, nodes - 1, 4]
-    base: np.ndarray  # [classes]
-    scale: np.ndarray  # [classes]
-    step: np.ndarray  # [classes]
+    coef: np.ndarray  # [classes * 4 (nodes - 1)]
+
+
+#: The fields of a row of :attr:`Mix.pair`: the force scale A, 1 / L, L, the opening
+#: threshold L delta_off (units p), the class table's base, scale and step, the class's
+#: own delta_min + SING_BAND (or -inf: no mean-force kick), the index in Mix.coef of the
+#: class's first cubic coefficient, and the left bead's 1 / m and substrate factor (1 and 1
+#: for a wall).
+PAIR_FIELDS = ("force_scale", "inv_len", "length", "delta_off", "base", "scale", "step",
+               "below", "first_coef", "left_inv_mass", "left_on_site")
+(P_SCALE, P_INV_LEN, P_LEN, P_OFF, P_BASE, P_WSCALE, P_STEP, P_BELOW, P_FIRST, P_INV_MASS,
+ P_ON_SITE) = range(len(PAIR_FIELDS))
+NPAIR = len(PAIR_FIELDS)
 
 
 def no_mix() -> Mix:
     """The :class:`Mix` of a homogeneous chain: empty arrays (never read)."""
     e = np.zeros(0)
-    return Mix(e, e, e, e, e, e, np.zeros(0, dtype=np.uint32), e, np.zeros((0, 5)),
-               np.zeros((0, 0, 4)), e, e, e)
+    return Mix(e, e, np.zeros(0, dtype=np.uint32), e, np.zeros(0, dtype=np.uint32),
+               np.zeros((0, 5)), e)
 
 
 class Drive(NamedTuple):
@@ -385,8 +404,8 @@ def spline(table, w):
     c = table.coef
     i = int(w)
     x = (w - i) * table.step
-    k = np.uint64(i)  # an unsigned index: no negative-index wraparound code on c[k, :]
-    return ((c[k, 0] * x + c[k, 1]) * x + c[k, 2]) * x + c[k, 3]
+    k = U4 * np.uint64(i)  # unsigned: no negative-index wraparound code on c[k]
+    return ((c[k] * x + c[k + U1]) * x + c[k + U2]) * x + c[k + U3]
 
 
 @njit(inline="always")
@@ -409,31 +428,45 @@ def contact_force(exact, hertz, d, params):
 
 # ---- unlike beads: each contact's own law (flags[MIXED]; Mix) --------------------------------
 @njit(inline="always")
-def class_law(mix, c):
-    """The Schwarz constants of law class c."""
+def class_law(mix, k):
+    """The Schwarz constants of the law class of contact kind k."""
+    c = mix.pair_class[k]
     return SchwarzConstants(mix.laws[c, 0], mix.laws[c, 1], mix.laws[c, 2], mix.laws[c, 3],
                             mix.laws[c, 4])
 
 
 @njit(inline="always")
-def class_spline(params, c, u):
-    """(f, ok): table force of class c at its own compression u (as :func:`contact_force`;
-    outside the table f is the last node's).  Written without an early return and without
-    array locals: numba then prunes the reference counting of the arrays it reads, which
-    otherwise cost 6x the whole pass."""
-    u = u - params.mix.base[c]
+def row_of(k):
+    """Index in Mix.pair of the first field of contact kind k's row (unsigned)."""
+    return np.uint64(NPAIR) * np.uint64(k)
+
+
+@njit(inline="always")
+def pair_at(params, k, field):
+    """Field ``field`` (P_*) of contact kind k's row."""
+    return params.mix.pair[row_of(k) + np.uint64(field)]
+
+
+@njit(inline="always")
+def class_spline(params, k, u):
+    """(f, ok): table force of contact kind k at its own compression u (as
+    :func:`contact_force`: beyond the table (0, False)).  The early return is a branch: with
+    ``ok`` a value instead, LLVM made the pass's failure test a select whose result it kept
+    on the stack, a dependence through memory from one contact to the next (9.7 -> 9.0 ns a
+    bead-step on a dimer chain of 1e4 beads).  (The variants compile without reference
+    counting, whose cost once made this function avoid early returns.)"""
+    u = u - pair_at(params, k, P_BASE)
     if u < 0.0:
         u = 0.0
-    w = math.sqrt(u) * params.mix.scale[c]
-    ok = w < params.table.last
-    if not ok:
-        w = 0.0
+    w = math.sqrt(u) * pair_at(params, k, P_WSCALE)
+    if not (w < params.table.last):
+        return 0.0, False
     i = int(w)
-    x = (w - i) * params.mix.step[c]
-    k = np.uint64(i)
-    f = ((params.mix.coef[c, k, 0] * x + params.mix.coef[c, k, 1]) * x
-         + params.mix.coef[c, k, 2]) * x + params.mix.coef[c, k, 3]
-    return f, ok
+    x = (w - i) * pair_at(params, k, P_STEP)
+    n = np.uint64(pair_at(params, k, P_FIRST)) + U4 * np.uint64(i)
+    f = ((params.mix.coef[n] * x + params.mix.coef[n + U1]) * x
+         + params.mix.coef[n + U2]) * x + params.mix.coef[n + U3]
+    return f, True
 
 
 @njit(inline="always")
@@ -442,14 +475,14 @@ def force_at(flags, params, j, d):
     (``A f(d / L)``)."""
     if not flags[MIXED]:
         return contact_force(flags[EXACT], flags[HERTZ], d, params)
-    c = params.mix.cls[j]
-    u = d * params.mix.inv_len[j]
+    k = params.mix.kind[j]
+    u = d * pair_at(params, k, P_INV_LEN)
     if flags[EXACT] or flags[HERTZ]:
         ok = u < params.delta_max
-        f = law_force(u, flags[HERTZ], class_law(params.mix, c)) if ok else 0.0
-        return params.mix.force_scale[j] * f, ok
-    f, ok = class_spline(params, c, u)
-    return params.mix.force_scale[j] * f, ok
+        f = law_force(u, flags[HERTZ], class_law(params.mix, k)) if ok else 0.0
+        return pair_at(params, k, P_SCALE) * f, ok
+    f, ok = class_spline(params, k, u)
+    return pair_at(params, k, P_SCALE) * f, ok
 
 
 @njit(inline="always")
@@ -457,15 +490,17 @@ def energy_at(flags, params, j, d):
     """Exact energy of closed contact j at compression d (``A L V(d / L)`` when mixed)."""
     if not flags[MIXED]:
         return law_energy(d, flags[HERTZ], params.law)
-    e = law_energy(d * params.mix.inv_len[j], flags[HERTZ], class_law(params.mix,
-                                                                       params.mix.cls[j]))
-    return params.mix.force_scale[j] * params.mix.length[j] * e
+    k = params.mix.kind[j]
+    e = law_energy(d * pair_at(params, k, P_INV_LEN), flags[HERTZ], class_law(params.mix, k))
+    return pair_at(params, k, P_SCALE) * pair_at(params, k, P_LEN) * e
 
 
 @njit(inline="always")
 def delta_off_at(params, j):
-    """Opening threshold of contact j (per contact for unlike beads: ``mix.delta_off``)."""
-    return params.mix.delta_off[j] if params.mix.delta_off.shape[0] > 0 else params.delta_off
+    """Opening threshold of contact j (per contact kind for unlike beads)."""
+    if params.mix.kind.shape[0] > 0:
+        return pair_at(params, params.mix.kind[j], P_OFF)
+    return params.delta_off
 
 
 @njit(inline="always")
@@ -473,9 +508,18 @@ def mean_force_at(flags, params, j, d0, d1):
     """Mean force of contact j over [d0, d1] (:func:`schwarz_mean_force`, scaled)."""
     if not flags[MIXED]:
         return schwarz_mean_force(d0, d1, params.law)
-    il = params.mix.inv_len[j]
-    law = class_law(params.mix, params.mix.cls[j])
-    return params.mix.force_scale[j] * schwarz_mean_force(d0 * il, d1 * il, law)
+    k = params.mix.kind[j]
+    il = pair_at(params, k, P_INV_LEN)
+    law = class_law(params.mix, k)
+    return pair_at(params, k, P_SCALE) * schwarz_mean_force(d0 * il, d1 * il, law)
+
+
+@njit(inline="always")
+def bead_factors(flags, params, i):
+    """(1 / m, substrate factor) of bead i: (1, 1) in a homogeneous chain."""
+    if flags[MIXED]:
+        return params.mix.inv_mass[i], params.mix.on_site[i]
+    return 1.0, 1.0
 
 
 @njit(inline="always")
@@ -556,10 +600,11 @@ def external_power(flags, params, beads, t):
 
 
 @njit(cache=True, inline="always")
-def bead_accelerations(f, fv, x, ve, i, flags, params, now):
-    """Bead i's acceleration from its net contact force ``f`` (and ``fv``, the same with the
+def bead_accelerations(f, fv, x, ve, im, g, flags, params, now):
+    """A bead's acceleration from its net contact force ``f`` (and ``fv``, the same with the
     mean-force kick near snap-off) plus the substrate terms the scene switches on (unlike
-    beads: the substrate times ``on_site[i]``, all over the bead's mass); ``ve`` the bead's
+    beads: the substrate times the bead's factor ``g``, all times its ``im = 1 / m``; see
+    :func:`bead_factors`; both read only when flags[MIXED]); ``ve`` the bead's
     velocity estimate at the step's end, for the substrate damping ``-c_s v``.  ``now`` =
     :func:`drive_at` at the step's end: the substrate acts on ``x - u_b`` and ``ve - u_b'``
     (the pulse is added after the pass, :func:`push_pulsed_bead`)."""
@@ -569,18 +614,18 @@ def bead_accelerations(f, fv, x, ve, i, flags, params, now):
     if flags[SUB_DAMPED]:
         fd = params.sub_damping * ve
         if flags[OFF_SUBSTRATE]:
-            fd *= params.mix.on_site[i]
+            fd *= g
         f -= fd
         fv -= fd
     if flags[MIXED]:
-        g = params.mix.on_site[i] if flags[OFF_SUBSTRATE] else 1.0
+        if not flags[OFF_SUBSTRATE]:
+            g = 1.0
         if flags[K1_ON]:
             f -= g * (params.k1 * x)
             fv -= g * (params.k1 * x)
         if flags[K3_ON]:
             f -= g * (params.k3 * x * x * x)
             fv -= g * (params.k3 * x * x * x)
-        im = params.mix.inv_mass[i]
         return f * im, fv * im
     if flags[K1_ON]:
         f -= params.k1 * x
@@ -592,10 +637,11 @@ def bead_accelerations(f, fv, x, ve, i, flags, params, now):
 
 
 @njit(inline="always")
-def substrate_power(v, i, flags, params):
-    """Dissipation rate of the substrate damping on bead i, ``g_i c_s v^2``."""
+def substrate_power(v, g, flags, params):
+    """Dissipation rate of the substrate damping on a bead of substrate factor g,
+    ``g c_s v^2``."""
     p = params.sub_damping * v * v
-    return p * params.mix.on_site[i] if flags[OFF_SUBSTRATE] else p
+    return p * g if flags[OFF_SUBSTRATE] else p
 
 
 @njit(inline="always")
@@ -667,8 +713,11 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             ve_r = vh_r + hh * a_r
         d = x_c - x_r - gap
         r = ve_c - ve_r
+        im_l, g_l, k = 1.0, 1.0, np.uint32(0)  # the left bead's factors (bead_factors), kind
         if flags[MIXED]:
-            doff = params.mix.delta_off[j]
+            k = params.mix.kind[j]
+            doff = pair_at(params, k, P_OFF)
+            im_l, g_l = pair_at(params, k, P_INV_MASS), pair_at(params, k, P_ON_SITE)
         if not flags[LOCATE] and quantized_due(closed[j], d, doff):
             k = j0 + np.uint64(nev)
             ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
@@ -682,7 +731,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             fv_r = f_r
             # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
             if flags[MIXED]:  # the class's band, in the contact's own units
-                near = (d * params.mix.inv_len[j] < params.mix.below[params.mix.cls[j]])
+                near = (d * pair_at(params, k, P_INV_LEN) < pair_at(params, k, P_BELOW))
             else:
                 near = d < params.mean_force_below
             if not hertz and near:
@@ -707,19 +756,20 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         if j == j0:  # the segment's edge: its first contact's force, for merge_segments
             f_first, fv_first = f_r, fv_r
         if rb >= one and (j > j0 or s == 0):  # finish the left bead
-            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, rb - one, flags,
+            a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, im_l, g_l, flags,
                                        params, now)
             if flags[SUB_DAMPED]:
-                power += substrate_power(ve_c - now[1], rb - one, flags, params)
+                power += substrate_power(ve_c - now[1], g_l, flags, params)
             xn[rb - one] = x_c
             an[rb - one] = a
             vn[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
-        a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, n - one, flags, params, now)
+        im, g = bead_factors(flags, params, n - one)
+        a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
         if flags[SUB_DAMPED]:
-            power += substrate_power(ve_c - now[1], n - one, flags, params)
+            power += substrate_power(ve_c - now[1], g, flags, params)
         xn[n - one] = x_c
         an[n - one] = a
         vn[n - one] = vh_c + hh * av
@@ -739,13 +789,14 @@ def finish_edge(flags, params, old, new, h, t1, seg, s):
     x = old.x[b] + h * vh
     ve = vh + hh * a_b
     real = seg.real
+    im, g = bead_factors(flags, params, b)
     a, av = bead_accelerations(real[s - 1, R_LAST] - real[s, R_FIRST],
-                               real[s - 1, R_LAST_KICK] - real[s, R_FIRST_KICK], x, ve, b,
+                               real[s - 1, R_LAST_KICK] - real[s, R_FIRST_KICK], x, ve, im, g,
                                flags, params, now)
     new.x[b] = x
     new.a[b] = a
     new.v[b] = vh + hh * av
-    return substrate_power(ve - now[1], b, flags, params) if flags[SUB_DAMPED] else 0.0
+    return substrate_power(ve - now[1], g, flags, params) if flags[SUB_DAMPED] else 0.0
 
 
 @njit(cache=True)
@@ -1009,7 +1060,7 @@ def init_acc(flags, params, beads, ks):
     for i in range(n):
         a[i] = 0.0
         if flags[SUB_DAMPED]:
-            power += substrate_power(v[i], i, flags, params)
+            power += substrate_power(v[i], bead_factors(flags, params, i)[1], flags, params)
             a[i] -= (params.mix.on_site[i] * (params.sub_damping * v[i]) if flags[MIXED]
                      else params.sub_damping * v[i])
         g = params.mix.on_site[i] if flags[MIXED] else 1.0
@@ -1265,7 +1316,7 @@ def _make_advance(flags, nrt: bool):
         gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s, drive = params
         l0, l1, l2, l3, l4 = law
         t_coef, t_base, t_scale, t_last, t_step = table
-        m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12 = mix
+        m0, m1, m2, m3, m4, m5, m6 = mix
         d0, d1, d2, d3, d4, d5 = drive
         xo, vo, ao = old
         xn, vn, an = new
@@ -1275,7 +1326,7 @@ def _make_advance(flags, nrt: bool):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
                        ForceTable(t_coef, t_base, t_scale, t_last, t_step),
-                       Mix(m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12), c_s,
+                       Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
                         (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
