@@ -55,10 +55,13 @@ static inline double spline(double w, double step) {
 
 /* One Verlet pass of length h from `o` into `nw`; returns the damping power at the end.
  * Inlined into `pass` with the scene's terms as constants (as numba's compiled variants
- * have them), so an absent term costs nothing in the loop. */
+ * have them), so an absent term costs nothing in the loop.  `mixed`: unlike beads, as the
+ * kernel's mixed variant: the contact's row read through its kind, its own units
+ * u = delta / L, F = A f(u), the mean-force test in its class's band, the left bead's
+ * acceleration times its 1 / m (table law only). */
 static inline __attribute__((always_inline)) double pass_of(
     const Header *P, const uint8_t *closed, Buf o, Buf nw, double h, Counts *cnt,
-    const int walls, const int hertz, const int damped, const int k1_on) {
+    const int walls, const int hertz, const int damped, const int k1_on, const int mixed) {
     const int64_t n = P->n, m = P->m;
     const double hh = 0.5 * h, gap = P->gap, c = P->c, k1 = P->k1, doff = P->doff;
     const double base = P->base, scale = P->scale, last = P->last, step = P->step;
@@ -82,9 +85,26 @@ static inline __attribute__((always_inline)) double pass_of(
         }
         double d = x_c - x_r - gap;
         double r = ve_c - ve_r;
-        double f_r = 0.0, fv_r = 0.0, g, gd;
+        double f_r = 0.0, fv_r = 0.0, g, gd, d_off = doff, im = 1.0;
+        const double *row = PAIR;
+        if (mixed) {
+            row = PAIR + (uint64_t)NPAIR * KIND[j];
+            d_off = row[P_OFF];
+            im = row[P_INV_MASS];
+        }
         if (closed[j]) {
-            if (hertz) {
+            if (mixed) {
+                double u = d * row[P_INV_LEN] - row[P_BASE];
+                if (u < 0.0) u = 0.0;
+                double w = sqrt(u) * row[P_WSCALE];
+                if (w < last) {
+                    int64_t i = (int64_t)w;
+                    double x = (w - (double)i) * row[P_STEP];
+                    const double *cf = MCOEF + (uint64_t)row[P_FIRST] + 4 * i;
+                    f_r = row[P_SCALE] * (((cf[0] * x + cf[1]) * x + cf[2]) * x + cf[3]);
+                } else
+                    bad++;
+            } else if (hertz) {
                 if (!(d < dmax)) bad++;
                 double dp = d < 0.0 ? 0.0 : d;
                 f_r = dp * sqrt(dp);
@@ -96,13 +116,14 @@ static inline __attribute__((always_inline)) double pass_of(
                 else bad++;
             }
             fv_r = f_r;
-            if (d < mfb) kicks++; /* the kernel's mean-force kick: not taken on these runs */
+            /* the kernel's mean-force kick: counted, not taken */
+            if (mixed ? d * row[P_INV_LEN] < row[P_BELOW] : d < mfb) kicks++;
             if (damped) {
                 f_r += c * r;
                 fv_r += c * r;
                 power += c * r * r;
             }
-            g = d - doff;
+            g = d - d_off;
             gd = r;
         } else {
             g = -d;
@@ -116,8 +137,8 @@ static inline __attribute__((always_inline)) double pass_of(
                 av -= k1 * x_c;
             }
             nw.x[rb - 1] = x_c;
-            nw.a[rb - 1] = a;
-            nw.v[rb - 1] = vh_c + hh * av;
+            nw.a[rb - 1] = mixed ? a * im : a;
+            nw.v[rb - 1] = vh_c + hh * (mixed ? av * im : av);
         }
         x_c = x_r, vh_c = vh_r, ve_c = ve_r;
         f_l = f_r, fv_l = fv_r;
@@ -131,70 +152,6 @@ static inline __attribute__((always_inline)) double pass_of(
         nw.x[n - 1] = x_c;
         nw.a[n - 1] = a;
         nw.v[n - 1] = vh_c + hh * av;
-    }
-    cnt->flagged += nflag;
-    cnt->kicks += kicks;
-    cnt->out_of_table += bad;
-    return power;
-}
-
-
-/* pass_of for unlike beads, as the kernel's mixed variant (walls, table law, damping, k1):
- * the contact's row read through its kind, its own units u = delta / L, F = A f(u), the
- * mean-force test in its class's band, the left bead's acceleration times its 1 / m. */
-static double pass_mixed(const Header *P, const uint8_t *closed, Buf o, Buf nw, double h,
-                         Counts *cnt) {
-    const int64_t n = P->n, m = P->m;
-    const double hh = 0.5 * h, gap = P->gap, c = P->c, k1 = P->k1, last = P->last;
-    double power = 0.0, x_c = 0.0, vh_c = 0.0, ve_c = 0.0, f_l = 0.0, fv_l = 0.0;
-    int64_t nflag = 0, kicks = 0, bad = 0;
-    for (int64_t j = 0; j < m; j++) {
-        int64_t rb = j;
-        double x_r = 0.0, vh_r = 0.0, ve_r = 0.0;
-        if (rb < n) {
-            double a_r = o.a[rb];
-            vh_r = o.v[rb] + hh * a_r;
-            x_r = o.x[rb] + h * vh_r;
-            ve_r = vh_r + hh * a_r;
-        }
-        double d = x_c - x_r - gap;
-        double r = ve_c - ve_r;
-        const double *row = PAIR + (uint64_t)NPAIR * KIND[j];
-        double doff = row[P_OFF], im = row[P_INV_MASS];
-        double f_r = 0.0, fv_r = 0.0, g, gd;
-        if (closed[j]) {
-            double u = d * row[P_INV_LEN] - row[P_BASE];
-            if (u < 0.0) u = 0.0;
-            double w = sqrt(u) * row[P_WSCALE];
-            if (w < last) {
-                int64_t i = (int64_t)w;
-                double x = (w - (double)i) * row[P_STEP];
-                const double *cf = MCOEF + (uint64_t)row[P_FIRST] + 4 * i;
-                f_r = row[P_SCALE] * (((cf[0] * x + cf[1]) * x + cf[2]) * x + cf[3]);
-            } else
-                bad++;
-            fv_r = f_r;
-            if (d * row[P_INV_LEN] < row[P_BELOW]) kicks++;
-            f_r += c * r;
-            fv_r += c * r;
-            power += c * r * r;
-            g = d - doff;
-            gd = r;
-        } else {
-            g = -d;
-            gd = -r;
-        }
-        if (g < 0.0 || g < 0.5 * h * gd) nflag++;
-        if (rb >= 1) {
-            double a = f_l - f_r, av = fv_l - fv_r;
-            a -= k1 * x_c;
-            av -= k1 * x_c;
-            nw.x[rb - 1] = x_c;
-            nw.a[rb - 1] = a * im;
-            nw.v[rb - 1] = vh_c + hh * (av * im);
-        }
-        x_c = x_r, vh_c = vh_r, ve_c = ve_r;
-        f_l = f_r, fv_l = fv_r;
     }
     cnt->flagged += nflag;
     cnt->kicks += kicks;
@@ -296,15 +253,15 @@ static double pass_blocked(const Header *P, const uint8_t *closed, Buf o, Buf nw
 static int BLOCKED = 0;
 static double pass(const Header *P, const uint8_t *closed, Buf o, Buf nw, double h, Counts *cnt) {
     if (BLOCKED) return pass_blocked(P, closed, o, nw, h, cnt);
-    if (KIND) return pass_mixed(P, closed, o, nw, h, cnt);
+    if (KIND) return pass_of(P, closed, o, nw, h, cnt, 1, 0, 1, 1, 1);
     if (P->damped && P->k1_on) {
         if (P->walls)
-            return P->hertz ? pass_of(P, closed, o, nw, h, cnt, 1, 1, 1, 1)
-                            : pass_of(P, closed, o, nw, h, cnt, 1, 0, 1, 1);
-        return P->hertz ? pass_of(P, closed, o, nw, h, cnt, 0, 1, 1, 1)
-                        : pass_of(P, closed, o, nw, h, cnt, 0, 0, 1, 1);
+            return P->hertz ? pass_of(P, closed, o, nw, h, cnt, 1, 1, 1, 1, 0)
+                            : pass_of(P, closed, o, nw, h, cnt, 1, 0, 1, 1, 0);
+        return P->hertz ? pass_of(P, closed, o, nw, h, cnt, 0, 1, 1, 1, 0)
+                        : pass_of(P, closed, o, nw, h, cnt, 0, 0, 1, 1, 0);
     }
-    return pass_of(P, closed, o, nw, h, cnt, P->walls, P->hertz, P->damped, P->k1_on);
+    return pass_of(P, closed, o, nw, h, cnt, P->walls, P->hertz, P->damped, P->k1_on, 0);
 }
 
 static void read_all(FILE *f, void *p, size_t size, size_t count) {
