@@ -280,6 +280,8 @@ class Segments(NamedTuple):
     #                   KernelState.flagged: merge_segments appends the other rows' to it)
     ev_real: np.ndarray  # [m, 2] switch k of segment s at row s * size + k: time, loss
     ev_contact: np.ndarray  # [m] int64 its contact
+    kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
+    #                     s * size + k (:func:`apply_kicks`)
 
 
 class KernelState(NamedTuple):
@@ -342,7 +344,7 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
     count = max(1, -(-n_contacts // size))
     return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
                     np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
-                    np.zeros(n_contacts, dtype=np.int64))
+                    np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64))
 
 
 def new_state(n_contacts: int, event_capacity: int, segment: int | None = None) -> KernelState:
@@ -645,6 +647,95 @@ def substrate_power(v, g, flags, params):
 
 
 @njit(inline="always")
+def in_kick_band(flags, params, j, d):
+    """Whether closed contact j at compression d gets the mean-force kick (never for Hertz):
+    in its class's band near snap-off, in its own units when mixed."""
+    if flags[HERTZ]:
+        return False
+    if flags[MIXED]:
+        k = params.mix.kind[j]
+        return d * pair_at(params, k, P_INV_LEN) < pair_at(params, k, P_BELOW)
+    return d < params.mean_force_below
+
+
+@njit(inline="always")
+def predicted(old, b, h):
+    """Bead b's predicted (x, v_half, v_est) at the end of a step of length h (as the pass)."""
+    hh = 0.5 * h
+    a = old.a[b]
+    vh = old.v[b] + hh * a
+    return old.x[b] + h * vh, vh, vh + hh * a
+
+
+@njit(cache=True)
+def contact_kick_force(flags, params, old, closed, h, j):
+    """Fv of contact j in the pass of length h from ``old`` (the force the beads' velocity
+    kick uses: :func:`segment_pass`'s ``fv``), its operations those of the pass."""
+    walls = flags[WALLS]
+    n = old.x.shape[0]
+    rshift = 0 if walls else 1
+    lb, rb = j + rshift - 1, j + rshift
+    x_l, ve_l, x_r, ve_r = 0.0, 0.0, 0.0, 0.0
+    if lb >= 0:
+        x_l, _, ve_l = predicted(old, lb, h)
+    if rb < n:
+        x_r, _, ve_r = predicted(old, rb, h)
+    if not closed[j]:
+        return 0.0
+    d = x_l - x_r - params.gap
+    r = ve_l - ve_r
+    fv = force_at(flags, params, j, d)[0]
+    if in_kick_band(flags, params, j, d):
+        d0 = across(walls, old.x, j) - params.gap
+        fv = 2.0 * mean_force_at(flags, params, j, d0, d) - force_at(flags, params, j, d0)[0]
+    if flags[DAMPED]:
+        fv += params.damping * r
+    return fv
+
+
+@njit(cache=True)
+def refinish(flags, params, old, vn, closed, h, now, b):
+    """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces of its two
+    contacts (:func:`contact_kick_force`), by the pass's operations."""
+    rshift = 0 if flags[WALLS] else 1
+    jl, jr = b - rshift, b - rshift + 1
+    fv_l = contact_kick_force(flags, params, old, closed, h, jl) if jl >= 0 else 0.0
+    fv_r = (contact_kick_force(flags, params, old, closed, h, jr) if jr < closed.shape[0]
+            else 0.0)
+    x, vh, ve = predicted(old, b, h)
+    im, g = bead_factors(flags, params, b)
+    av = bead_accelerations(0.0, fv_l - fv_r, x, ve, im, g, flags, params, now)[1]
+    vn[b] = vh + 0.5 * h * av
+
+
+@njit(cache=True)
+def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, j0, j1, count, s, fv_first,
+                fv_last):
+    """The mean-force kicks of segment s's contacts ``kicked[j0: j0 + count]`` (in the band
+    near snap-off), after its pass: the velocities of the beads next to them that the pass
+    finished, redone with each contact's ``Fv`` (:func:`contact_kick_force`) by the pass's
+    operations, and the segment's first and last ``Fv``; returns those two.  Out of the
+    pass's loop, whose registers a call inside it cost 20-30 % on a chain of unlike beads."""
+    n = old.x.shape[0]
+    rshift = 0 if flags[WALLS] else 1
+    now = drive_at(flags, params, t0 + h)
+    # the beads this pass finished: the left bead of each of its contacts but the first's when
+    # s > 0 (finish_edge does it) and the walls; the last bead is finished after it
+    lo = max(j0 + rshift - (0 if s > 0 else 1), 0)
+    hi = min(j1 + rshift - 2, n - 1)
+    for k in range(count):
+        j = kicked[j0 + k]
+        if j == j0:
+            fv_first = contact_kick_force(flags, params, old, closed, h, j)
+        if j == j1 - 1:
+            fv_last = contact_kick_force(flags, params, old, closed, h, j)
+        for b in (j + rshift - 1, j + rshift):
+            if lo <= b <= hi:
+                refinish(flags, params, old, vn, closed, h, now, b)
+    return fv_first, fv_last
+
+
+@njit(inline="always")
 def quantized_due(closed, d, delta_off):
     """locate = False: whether a contact with end-of-step compression d switches (strict
     inequalities when delta_off = 0: a DMT or Hertz contact resting at delta = 0 stays)."""
@@ -657,7 +748,7 @@ def quantized_due(closed, d, delta_off):
 @njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
-    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact)``): returns
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked)``): returns
     its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
     first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
     switches, status, its contact); the first flagged contacts go into row ``s`` of ``flag``,
@@ -676,7 +767,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    h, t0, size, flag, ev_real, ev_contact = seg
+    h, t0, size, flag, ev_real, ev_contact, kicked = seg
     walls, hertz = flags[WALLS], flags[HERTZ]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
@@ -689,6 +780,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     gap, c, doff = params.gap, params.damping, params.delta_off
     nflag = 0
     nev = 0
+    nkick = 0
     status = OK
     bad = 0
     power = 0.0
@@ -729,15 +821,10 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             if not ok:
                 status, bad = OUT_OF_TABLE, np.int64(j)
             fv_r = f_r
-            # near snap-off: mean-force kick (never for Hertz: the test is compiled out)
-            if flags[MIXED]:  # the class's band, in the contact's own units
-                near = (d * pair_at(params, k, P_INV_LEN) < pair_at(params, k, P_BELOW))
-            else:
-                near = d < params.mean_force_below
-            if not hertz and near:
-                d0 = across(walls, xo, np.int64(j)) - gap
-                fv_r = (2.0 * mean_force_at(flags, params, j, d0, d)
-                        - force_at(flags, params, j, d0)[0])
+            # near snap-off: the mean-force kick, after the loop (apply_kicks)
+            if in_kick_band(flags, params, j, d):
+                kicked[j0 + np.uint64(nkick)] = np.int64(j)
+                nkick += 1
             if flags[DAMPED]:
                 f_r += c * r
                 fv_r += c * r
@@ -765,6 +852,10 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             vn[rb - one] = vh_c + hh * av
         x_c, vh_c, ve_c = x_r, vh_r, ve_r
         f_l, fv_l = f_r, fv_r
+    if nkick > 0:
+        fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
+                                     kicked, np.int64(j0), np.int64(j1), nkick, s, fv_first,
+                                     fv_l)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
@@ -873,7 +964,8 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
             push_pulsed_bead(flags, params, new, h, t0 + h)
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
-                              (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact), 0)
+                              (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
+                               seg.kicked), 0)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
         log_switches(ks, 0)
@@ -1298,9 +1390,9 @@ def _make_advance(flags, nrt: bool):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
-        h, t0, size, real, ints, flag, ev_real, ev_contact = seg
+        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked = seg
         r, i = segment_pass(literal, params, old, xn, vn, an, closed,
-                            (h, t0, size, flag, ev_real, ev_contact), s)
+                            (h, t0, size, flag, ev_real, ev_contact, kicked), s)
         for k in range(5):
             real[s, k] = r[k]
         for k in range(4):
@@ -1321,7 +1413,7 @@ def _make_advance(flags, nrt: bool):
         xo, vo, ao = old
         xn, vn, an = new
         closed = ks.closed
-        size, count, real, ints, flag, ev_real, ev_contact = ks.seg
+        size, count, real, ints, flag, ev_real, ev_contact, kicked = ks.seg
         for s in prange(count):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
@@ -1329,7 +1421,7 @@ def _make_advance(flags, nrt: bool):
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact), s)
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt)
