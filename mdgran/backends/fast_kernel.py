@@ -768,7 +768,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
     h, t0, size, flag, ev_real, ev_contact, kicked = seg
-    walls, hertz = flags[WALLS], flags[HERTZ]
+    walls = flags[WALLS]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
     # unsigned indices: numba emits no negative-index wraparound code for them
@@ -788,10 +788,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     # left bead of the current contact: (x, v_half, v_est); the wall for walls
     x_c, vh_c, ve_c = 0.0, 0.0, 0.0
     if j0 + rshift >= one:
-        lb = j0 + rshift - one
-        vh_c = vo[lb] + hh * ao[lb]
-        x_c = xo[lb] + h * vh_c
-        ve_c = vh_c + hh * ao[lb]
+        x_c, vh_c, ve_c = predicted(old, j0 + rshift - one, h)
     f_l, fv_l = 0.0, 0.0  # force of the contact left of that bead (Fv: for the kick)
     f_first, fv_first = 0.0, 0.0
     for i in range(j1 - j0):
@@ -875,10 +872,7 @@ def finish_edge(flags, params, old, new, h, t1, seg, s):
     now = drive_at(flags, params, t1)
     b = s * seg.size - (1 if flags[WALLS] else 0)
     hh = 0.5 * h
-    a_b = old.a[b]
-    vh = old.v[b] + hh * a_b
-    x = old.x[b] + h * vh
-    ve = vh + hh * a_b
+    x, vh, ve = predicted(old, b, h)
     real = seg.real
     im, g = bead_factors(flags, params, b)
     a, av = bead_accelerations(real[s - 1, R_LAST] - real[s, R_FIRST],
@@ -1151,11 +1145,11 @@ def init_acc(flags, params, beads, ks):
     power = 0.0
     for i in range(n):
         a[i] = 0.0
+        g = bead_factors(flags, params, i)[1]
         if flags[SUB_DAMPED]:
-            power += substrate_power(v[i], bead_factors(flags, params, i)[1], flags, params)
-            a[i] -= (params.mix.on_site[i] * (params.sub_damping * v[i]) if flags[MIXED]
+            power += substrate_power(v[i], g, flags, params)
+            a[i] -= (g * (params.sub_damping * v[i]) if flags[MIXED]
                      else params.sub_damping * v[i])
-        g = params.mix.on_site[i] if flags[MIXED] else 1.0
         if flags[K1_ON]:
             a[i] -= g * (params.k1 * x[i]) if flags[MIXED] else params.k1 * x[i]
         if flags[K3_ON]:
