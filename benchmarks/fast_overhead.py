@@ -8,8 +8,9 @@ before and after each measurement (the machine is shared: read the timings with 
 
 * ``micro_star``: micro-star to t = 400 (4001 frames at the default output interval 0.1) at
   ``dt`` = 0.0025 and 0.01.  Times (s): ``kernel`` (the compiled stepping loop only,
-  ``stats["kernel_s"]``), ``backend`` (iterating ``FastBackend.frames()`` with nothing done
-  per frame: kernel plus the backend's own per-frame work), ``run`` (:func:`mdgran.simulation.run`:
+  ``stats["kernel_s"]``), ``backend`` (iterating ``FastBackend.blocks()``, what the driver
+  iterates, or in a tree without it ``frames()``, with nothing done per frame: kernel plus
+  the backend's own per-frame work), ``run`` (:func:`mdgran.simulation.run`:
   backend, ledger, in-memory reporter), the same as CPU times (``backend_cpu``,
   ``backend_kernel_cpu``: the kernel calls of the ``backend`` measurement, ``run_cpu``; the
   process's, less sensitive to other processes than wall times), ``process`` (a whole
@@ -73,7 +74,8 @@ def timed(*args):  # the kernel's CPU time (the process's: every thread)
         kernel_cpu[0] += time.process_time() - c
 b.advance = timed
 w, c = time.perf_counter(), time.process_time()
-frames = sum(1 for _ in b.frames())
+frames = (sum(len(bl) for bl in b.blocks()) if hasattr(b, "blocks")  # what the driver takes
+          else sum(1 for _ in b.frames()))
 out["backend"] = time.perf_counter() - w
 out["backend_cpu"] = time.process_time() - c
 out["backend_kernel"] = b.stats["kernel_s"]

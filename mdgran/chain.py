@@ -389,14 +389,6 @@ class ChainModel:
         led["total_energy"] = total - work
         return led
 
-    def ledger_rows(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
-                    external_work=None, t=None) -> list:
-        """:meth:`ledger_block` as one :meth:`ledger` dict (of floats) per state."""
-        led = self.ledger_block(x, v, closed, dissipated_viscous, dissipated_hysteresis,
-                                external_work, t)
-        names = tuple(led)
-        return [dict(zip(names, row)) for row in zip(*(led[k].tolist() for k in names))]
-
     def _block_differences(self, x):
         """:meth:`differences` of each row of ``x`` [F, n]: ``[F, n_contacts]``."""
         if self.walls:

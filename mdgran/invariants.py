@@ -14,7 +14,7 @@ initial value, error relative to the impulse energy ``E_imp = v0^2 / 2``, units 
 with the displacement rule every opening loses exactly the loop energy
 (``D_hysteresis = opens * W``; for unlike beads each opening its own contact's).
 
-:func:`check_run` drives a backend frame by frame (``make_backend(scene, name).frames()``)
+:func:`check_run` runs a scene through the driver with a reporter that checks every frame
 and returns a :class:`RunCheck` with everything found; tests and
 ``benchmarks/invariant_campaign.py`` use it.  :func:`matched_events` compares two runs' event
 sequences.

@@ -255,10 +255,11 @@ class ProgressReporter:
         if self.delay <= 0 and not self.shown:
             self._draw()
 
-    def report(self, frame, ledger):
-        self.t = float(frame.time)
+    def report_block(self, block):
+        """Show the time of the last frame of ``block`` (at most every ``interval``)."""
+        self.t = float(block.time[-1])
         if self.t0 is None:
-            self.t0 = self.t
+            self.t0 = float(block.time[0])
         now = _time.perf_counter()
         if now - self.start_time < self.delay:
             return
@@ -407,8 +408,8 @@ class ProgressFile:
         except OSError:  # progress is not worth failing a case over
             pass
 
-    def report(self, frame, ledger):
-        self.t = float(frame.time)
+    def report_block(self, block):
+        self.t = float(block.time[-1])
         now = _time.perf_counter()
         if now - self.last >= self.every:
             self.last = now

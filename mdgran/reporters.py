@@ -135,25 +135,14 @@ class MemoryReporter:
     ``[frames, n_contacts]`` bool)."""
 
     def __init__(self):
-        self.time, self.x, self.v, self.closed = [], [], [], []
-        self.ledgers = []  # each frame's ledger dict
-        self.events = []
+        self.blocks = []  # the blocks of frames (mdgran.backends.base.Frames) as they came
         self.status = None
 
-    def report(self, frame, ledger):
-        """Keep the frame's arrays as they are (a backend hands every frame arrays of its own,
-        which it does not change after) and its ledger."""
-        self.time.append(frame.time)
-        self.x.append(frame.x)
-        self.v.append(frame.v)
-        self.closed.append(frame.closed)
-        self.ledgers.append(ledger)
-        self.events.extend(frame.events)
-
-    @property
-    def ledger(self) -> dict:
-        """``{term: [its value at each frame so far]}``, for the terms of LEDGER_NAMES."""
-        return {k: [led[k] for led in self.ledgers] for k in LEDGER_NAMES}
+    def report_block(self, block):
+        """Keep the block as it is (a backend hands every block arrays of its own, which it
+        does not change after) with its ledger."""
+        block.ledger()
+        self.blocks.append(block)
 
     def close(self, status):
         self.status = status
@@ -161,15 +150,23 @@ class MemoryReporter:
     def record(self, scene=None, backend="") -> Run:
         """The frames so far as a :class:`~mdgran.run_record.Run` of ``scene`` (a
         :class:`~mdgran.scene.Scene`) on ``backend``."""
-        ev = self.events
+        blocks = self.blocks
+
+        def joined(name, dtype=float):
+            parts = [getattr(b, name) for b in blocks]
+            return np.concatenate(parts).astype(dtype, copy=False) if parts else np.array(
+                [], dtype=dtype)
+
+        ev = [e for b in blocks for e in b.events]
         return Run(
-            time=np.array(self.time), x=np.array(self.x), v=np.array(self.v),
-            ledger={k: np.array(v) for k, v in self.ledger.items()},
+            time=joined("time"), x=joined("x"), v=joined("v"),
+            ledger={k: np.concatenate([b.ledger()[k] for b in blocks]) if blocks
+                    else np.array([]) for k in LEDGER_NAMES},
             ev_time=np.array([e.time for e in ev], dtype=float),
             ev_contact=np.array([e.contact for e in ev], dtype=np.int64),
             ev_kind=np.array([e.kind for e in ev], dtype=np.int8),
             scene=scene, backend=backend, attrs={"status": self.status},
-            closed=np.array(self.closed, dtype=bool) if self.closed else None)
+            closed=joined("closed", bool) if blocks else None)
 
 
 class H5MDWriter:
@@ -228,7 +225,9 @@ class H5MDWriter:
         self.f = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.lock = OutputLock(self.path)
+        # (step, time, x, v, ledger, per-contact series) of each block not yet written
         self._buf = []
+        self._buffered = 0  # frames in _buf
         self._events = []
         self._frames = 0
         self._last_step = None
@@ -503,23 +502,26 @@ class H5MDWriter:
         return cls.mpi_world_size()
 
     # ---- frames ----------------------------------------------------------------------------
-    def report(self, frame, ledger):
+    def report_block(self, block):
+        """Buffer the frames of ``block`` (:class:`~mdgran.backends.base.Frames`; its arrays
+        as they are: a backend hands every block arrays of its own, which it does not change
+        after), written when the buffer holds ``_block`` frames or more."""
         if self.mpi_ranks is None:  # the backend has started: its communicator is known
             self.mpi_ranks = self.mpi_ranks_of(self.backend)
-        # the states as they are (a backend hands every frame arrays of its own, which it does
-        # not change after: MemoryReporter keeps them too); stored columns taken at the flush
-        per_contact = {"closed": frame.closed}
+        per_contact = {"closed": block.closed}
         if self.contacts:
             m, cols = self.model, self._cols
-            per_contact["compression"] = m.compressions(frame.x)[cols]
-            per_contact["force"] = m.contact_forces(frame.x, frame.v, frame.closed)[cols]
-        x, v = frame.x, frame.v
+            per_contact["compression"] = np.array([m.compressions(x)[cols] for x in block.x])
+            per_contact["force"] = np.array([m.contact_forces(x, v, c)[cols] for x, v, c in
+                                             zip(block.x, block.v, block.closed)])
+        x, v = block.x, block.v
         if self.stride != 1:  # copies of the stored beads (a view would keep all of them)
-            x, v = x[self._beads].copy(), v[self._beads].copy()
-        self._buf.append((frame.step, frame.time, x, v, ledger, per_contact))
-        self._events.extend(frame.events)
-        self._last_step = frame.step
-        if len(self._buf) >= self._block:
+            x, v = x[:, self._beads], v[:, self._beads]
+        self._buf.append((block.step, block.time, x, v, block.ledger(), per_contact))
+        self._buffered += len(block)
+        self._events.extend(block.events)
+        self._last_step = int(block.step[-1])
+        if self._buffered >= self._block:
             self._guard(self._flush)
         if (self.checkpoint_every is not None
                 and _time.perf_counter() - self._last_checkpoint >= self.checkpoint_every):
@@ -550,10 +552,10 @@ class H5MDWriter:
     def _flush_beads(self, steps, times):
         """Append the buffered frames' per-bead series (the stored beads only)."""
         chain = "particles/chain"
-        x = np.array([b[2] for b in self._buf])
+        x = np.concatenate([b[2] for b in self._buf])
+        v = np.concatenate([b[3] for b in self._buf])
         self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x)
-        self._append(f"{chain}/velocity", self._series["velocity"], steps, times,
-                     np.array([b[3] for b in self._buf]))
+        self._append(f"{chain}/velocity", self._series["velocity"], steps, times, v)
         if self.positions:
             pos = np.zeros(x.shape + (3,))
             pos[..., 0] = self._rest + x * self._pos_scale
@@ -562,22 +564,22 @@ class H5MDWriter:
 
     def _flush(self):
         if self._buf:
-            steps = np.array([b[0] for b in self._buf], dtype=np.int64)
-            times = np.array([b[1] for b in self._buf])
+            buf = self._buf
+            steps = np.concatenate([b[0] for b in buf]).astype(np.int64, copy=False)
+            times = np.concatenate([b[1] for b in buf]).astype(float, copy=False)
             if "displacement" in self._series:  # not with output.bead_stride = 0
                 self._flush_beads(steps, times)
             for name in self.terms:
                 self._append(f"observables/{name}", self._series[name], steps, times,
-                             np.array([b[4][name] for b in self._buf]))
+                             np.concatenate([b[4][name] for b in buf]))
             for name in CONTACT_SERIES:
                 key = f"contacts/{name}"
                 if key in self._series:
-                    rows = [b[5][name] for b in self._buf]
-                    values = (np.array(rows, dtype=np.int8)[:, self._cols] if name == "closed"
-                              else np.array(rows))
+                    rows = np.concatenate([b[5][name] for b in buf])
+                    values = rows.astype(np.int8)[:, self._cols] if name == "closed" else rows
                     self._append(f"observables/{key}", self._series[key], steps, times, values)
-            self._frames += len(self._buf)
-            self._buf = []
+            self._frames += self._buffered
+            self._buf, self._buffered = [], 0
         if self._events:
             ev = self._events
             k0 = self._ev["time"].shape[0]

@@ -12,6 +12,13 @@ Example::
 A run ends "complete" only if it did not fail and its ledger error is within its backend's
 declared bound (:meth:`~mdgran.backends.base.Backend.ledger_bound`); otherwise its status starts
 with ``LEDGER_EXCEEDED`` and says both numbers.
+
+The driver takes the backend's frames by blocks (:meth:`~mdgran.backends.base.Backend.blocks`:
+the fast backend's kernel calls, a frame each for the others), computes each block's ledger
+once, and hands each block to every reporter: ``reporter.report_block(block)`` (a
+:class:`~mdgran.backends.base.Frames`; ``block.ledger()`` its ledger), or, for a reporter
+without it, ``reporter.report(frame, ledger)`` frame by frame; ``reporter.close(status)`` at
+the end.  A checkpoint falls between blocks.
 """
 from __future__ import annotations
 
@@ -20,6 +27,8 @@ import os
 from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from .backends import BadSpec, get_backend, parse_spec
 from .backends.base import IntegrationError
@@ -205,6 +214,25 @@ def spec_of(backend: str) -> tuple[str, dict]:
         raise SceneError("backend", str(exc)) from None
 
 
+def worst(so_far: float, errors: np.ndarray) -> float:
+    """The largest of ``so_far`` and ``errors``; NaN once any is NaN (a NaN error is not
+    within any bound)."""
+    e = float(errors.max())
+    return so_far if so_far != so_far or e <= so_far else e
+
+
+def report(reporter, block) -> None:
+    """Hand the frames of ``block`` (:class:`~mdgran.backends.base.Frames`) to ``reporter``:
+    whole if it has ``report_block(block)``, else frame by frame, ``report(frame, ledger)``
+    (each frame's ledger a dict, as :meth:`~mdgran.chain.ChainModel.ledger` gives it)."""
+    whole = getattr(reporter, "report_block", None)
+    if whole is not None:
+        whole(block)
+        return
+    for k in range(len(block)):
+        reporter.report(block.frame(k), block.ledger_row(k))
+
+
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,
         reporters=(), raise_errors: bool = True, checkpoint_every: float | None = None,
         resume: bool = False, collective: bool = True, **options) -> RunResult:
@@ -262,17 +290,17 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         # checkpoint (the backend's state at its last frame) matches the frames written
         notice = CompileNotice(f"{scene.name} [{b.name}]") if progress else nullcontext()
         with notice, FrameSections() as sections:
-            for frame in (b.frames(resume=start) if start is not None else b.frames()):
+            for block in (b.blocks(resume=start) if start is not None else b.blocks()):
                 sections.inside = True
-                led = frame.ledger(model)  # from the frame's block, if the backend made one
+                led = block.ledger()  # {term: [F]}, computed once for the block's frames
                 if e0 is None:
-                    e0 = led["total_energy"]
+                    e0 = float(led["total_energy"][0])
                     scale = ledger_scale(scene.energy_scale, e0)
-                max_err = max(max_err, abs(relative_ledger_error(led["total_energy"], e0,
-                                                                 scale)))
-                term_max = max(term_max, max(map(abs, led.values())))
+                max_err = worst(max_err, np.abs(relative_ledger_error(led["total_energy"], e0,
+                                                                      scale)))
+                term_max = max(term_max, max(float(np.abs(c).max()) for c in led.values()))
                 for r in reps:
-                    r.report(frame, led)
+                    report(r, block)
                 sections.leave()
     except IntegrationError as exc:
         status, err = f"failed: {exc}", str(exc)

@@ -60,7 +60,13 @@ class InterruptAt:
 
 
 @pytest.fixture
-def interrupt_at():
+def interrupt_at(monkeypatch):
+    """:class:`InterruptAt`; the fast backend's blocks made one frame long meanwhile (its
+    checkpoints fall between blocks: with the default, one block of a short run holds all
+    its frames, and an interrupted run would resume from t = 0)."""
+    import mdgran.backends.fast as fast
+
+    monkeypatch.setattr(fast, "BLOCK_BEAD_STEPS", 1)
     return InterruptAt
 
 

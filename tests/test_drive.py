@@ -126,14 +126,19 @@ def test_driven_ledger_closes_and_backends_agree(amplitude, duration, base_amp, 
     """Kinetic + contact + substrate + dissipated - external work stays at E0 within each
     backend's bound (the ledger is an independent conservation law: W is integrated apart
     from the motion), and the fast backend's work and motion follow the reference's up to
-    t = 5, before contact events can set the two runs apart."""
+    t = 5 or the first contact event, whichever comes first: a grazing event's time is
+    sensitive to the state (amplitude 1.875, duration 0.3125: positions within 5e-5 before
+    the first snap at t = 2.65, whose time then differs by 1.7e-3 between the backends, and
+    the positions after it by 3e-3)."""
     sc = shaken_chain(amplitude, duration, base_amp, seed)
     ref, fast = run(sc, "reference"), run(sc, "fast")
     for res in (ref, fast):
         assert res.status == "complete"
         assert res.max_ledger_error <= res.ledger_bound
     scale = sc.energy_scale
-    early = ref.trajectory.time <= 5.0
+    first = min([5.0, *ref.trajectory.ev_time[:1], *fast.trajectory.ev_time[:1]])
+    early = ref.trajectory.time < first
+    assert early.sum() >= 2
     w_ref = ref.trajectory.ledger["external_work"]
     w_fast = fast.trajectory.ledger["external_work"]
     assert np.abs(w_ref - w_fast)[early].max() < 1e-3 * scale

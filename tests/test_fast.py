@@ -123,20 +123,28 @@ def test_deterministic_and_checkpoint_resume_is_identical(tmp_path, interrupt_at
 
 
 @pytest.mark.parametrize("name,locate", [("dmt-chain", True), ("micro-star", False)])
-def test_frames_independent_of_kernel_blocks_and_event_log_size(monkeypatch, name, locate):
-    """The loop runs a block of frames per call and hands the event log back when half full:
-    a block of one frame and a 16-event log (full at 8 events, mid-frame) must give the
-    same frames and events, bit for bit, as the defaults (one block for the whole run)."""
+def test_frames_independent_of_kernel_blocks_and_event_log_size(monkeypatch, tmp_path, name,
+                                                               locate):
+    """The loop runs a block of frames per call and hands the event log back when half full;
+    the driver hands the blocks whole to the file and the in-memory record: a block of one
+    frame and a 16-event log (full at 8 events, mid-frame) must give the same frames, events,
+    ledgers and file, bit for bit, as the defaults (one block for the whole run)."""
     import mdgran.backends.fast as fast
 
     sc = load_scene(name, [("run.duration", 60.0), ("run.output_interval", 10.0)])
-    a = run(sc, "fast", locate_events=locate).trajectory
+    a = run(sc, "fast", out=tmp_path / "a.h5", locate_events=locate).trajectory
     assert np.diff(np.searchsorted(a.ev_time, a.time)).max() > 8  # some frame fills the log
     monkeypatch.setattr(fast, "EVENT_BUFFER", 16)
     monkeypatch.setattr(fast, "BLOCK_BEAD_STEPS", 1)
-    b = run(sc, "fast", locate_events=locate).trajectory
+    b = run(sc, "fast", out=tmp_path / "b.h5", locate_events=locate).trajectory
     for key in ("time", "x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
         assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), key
+    for key in a.ledger:
+        assert a.ledger[key].tobytes() == b.ledger[key].tobytes(), key
+    da, db = h5_datasets(tmp_path / "a.h5"), h5_datasets(tmp_path / "b.h5")
+    assert da.keys() == db.keys()
+    for k in da:
+        assert da[k].tobytes() == db[k].tobytes(), k
 
 
 def test_loop_runs_without_reference_counting(monkeypatch):

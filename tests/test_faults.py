@@ -31,18 +31,22 @@ def _start(args, **kw):
                             text=True, **kw)
 
 
-def _wait_for(path, proc, timeout=120.0, checkpoint=False):
-    """Wait until ``path`` exists (and holds a checkpoint) while ``proc`` runs."""
+def _wait_for(path, proc, timeout=120.0, checkpoint=False, may_end=False):
+    """Wait until ``path`` exists (and holds a checkpoint) while ``proc`` runs; with
+    ``may_end``, False if ``proc`` ended first with status 0.  True once it is there."""
     deadline = time.time() + timeout
     while time.time() < deadline:
+        if may_end and proc.poll() == 0:
+            proc.communicate()
+            return False
         assert proc.poll() is None, proc.communicate()
         if path.exists():
             if not checkpoint:
-                return
+                return True
             try:
                 with h5py.File(path, "r", locking=False) as f:
                     if "checkpoint" in f:
-                        return
+                        return True
             except (OSError, RuntimeError, KeyError):  # read while being written: not yet
                 pass
         time.sleep(0.05)
@@ -92,14 +96,17 @@ def test_sigterm_leaves_a_checkpoint_that_resumes_bitwise(tmp_path, backend):
     """Case 4: SIGTERM (a scheduler's time limit) left an invalid 96-byte temporary."""
     # long enough to be running when the first checkpoint is written: the fast backend runs
     # micro-star's 3000 frames to t = 30 in ~0.1 s since it computes frames in blocks (30000
-    # frames take ~0.6 s after start-up); a run that ends before the signal is run again 4x
-    # as long, never skipped (a skip would let the test pass without checking anything)
+    # frames take ~0.6 s after start-up), and checkpoints between blocks (12500 frames here);
+    # a run that ends before its first checkpoint or before the signal is run again 4x as
+    # long, never skipped (a skip would let the test pass without checking anything)
     out = tmp_path / "t.h5"
-    for duration in [{"reference": 30, "fast": 300}[backend] * 4**k for k in range(3)]:
+    for duration in [{"reference": 30, "fast": 300}[backend] * 4**k for k in range(4)]:
         args = ["run", "micro-star", "--set", f"run.duration={duration}", "--set",
                 "run.output_interval=0.01", "--backend", backend, "--quiet"]
         proc = _start([*args, "--out", str(out), "--checkpoint", "0.2"])
-        _wait_for(tmp_path / "t.h5.partial", proc, checkpoint=True)
+        if not _wait_for(tmp_path / "t.h5.partial", proc, checkpoint=True, may_end=True):
+            out.unlink()
+            continue
         code, err = _stop(proc, signal.SIGTERM)
         if code != 0:
             break

@@ -35,11 +35,12 @@ def test_block_ledger_is_the_ledger_of_each_state(name, overrides, n):
     model = model_from_scene(load_scene(name, [*overrides, ("chain.n", n)]))
     rng = np.random.default_rng(n)
     x, v, closed, dv, dh = random_block(model, 40, rng)
-    rows = model.ledger_rows(x, v, closed, dv, dh)
-    for k, row in enumerate(rows):
+    block = model.ledger_block(x, v, closed, dv, dh)
+    for k in range(len(x)):
         one = model.ledger(x[k], v[k], closed[k], float(dv[k]), float(dh[k]))
-        assert list(row) == list(one)
-        assert [float(a).hex() for a in row.values()] == [float(b).hex() for b in one.values()]
+        assert list(block) == list(one)
+        assert [float(c[k]).hex() for c in block.values()] == [float(b).hex()
+                                                               for b in one.values()]
 
 
 def test_row_dots_is_np_dot_of_each_row():
@@ -51,12 +52,12 @@ def test_row_dots_is_np_dot_of_each_row():
 
 def test_fast_frames_carry_their_ledgers():
     """Every frame of a fast run (events included) hands the driver the ledger that
-    ChainModel.ledger computes from the frame itself."""
+    ChainModel.ledger computes from the frame itself, from its block's."""
     b = FastBackend(load_scene("micro-star", [("run.duration", 60.0)]))
     frames = list(b.frames())
     assert len(frames) == 601 and b.stats["events"] > 0
     for f in frames:
         one = b.model.ledger(f.x, f.v, f.closed, f.dissipated_viscous, f.dissipated_hysteresis)
-        got = f.ledger_block[f.block_row] if f.ledger_block is not None else one
+        got = f.ledger(b.model)
         assert [float(a).hex() for a in got.values()] == [float(b).hex() for b in one.values()]
-    assert sum(f.ledger_block is not None for f in frames) == 600  # all but the first
+    assert {len(f.block) for f in frames} == {1, 600}  # t = 0 alone, then one kernel call

@@ -19,8 +19,13 @@ class FakeTTY(io.StringIO):
 
 
 @dataclass
-class Frame:
-    time: float
+class Frames:
+    """A block of one frame at ``t``, as the driver hands progress reporters."""
+    t: float
+
+    @property
+    def time(self):
+        return [self.t]
 
 
 def screen(text: str) -> list:
@@ -57,13 +62,13 @@ def test_reporter_ends_at_100_percent_and_pads_over_longer_lines():
     out = FakeTTY()
     rep = ProgressReporter(400.0, label="micro-star [reference]", delay=0.0, stream=out,
                            interval=0.0, width=200)
-    rep.report(Frame(0.0), None)
+    rep.report_block(Frames(0.0))
     rep.label = "micro-star [reference] with a much longer label for one draw"
-    rep.report(Frame(68.0), None)
+    rep.report_block(Frames(68.0))
     rep.label = "micro-star [reference]"
-    rep.report(Frame(69.0), None)
+    rep.report_block(Frames(69.0))
     rep.interval = 1e9  # no redraw between here and the end: the bar would stay at 17 %
-    rep.report(Frame(400.0), None)
+    rep.report_block(Frames(400.0))
     rep.close("complete")
     shown = screen(out.getvalue())
     assert len(shown) == 1 and out.getvalue().endswith("\n")
@@ -106,7 +111,7 @@ def test_narrow_terminal_lines_fit_and_keep_their_role():
     rep = series.reporter(("reference", "nominal"))
     rep.start()
     for t in (0.0, 1.0, 5.0, 10.0):
-        rep.report(Frame(t), None)
+        rep.report_block(Frames(t))
     rep.close("complete")
     lines = screen(out.getvalue())
     assert len(lines) == 1 and len(lines[0]) <= 71

@@ -1,7 +1,9 @@
 """What every backend yields, and the errors it raises.
 
 A backend is constructed from a resolved scene and iterated: ``for frame in backend.frames()``
-yields one :class:`Frame` per stored output time, the first at ``t = 0``.  Each frame carries
+yields one :class:`Frame` per stored output time, the first at ``t = 0``;
+``backend.blocks()`` yields the same frames as blocks of consecutive ones (:class:`Frames`),
+which the driver iterates.  Each frame carries
 the contact events since the previous frame.  The ledger (energies) is computed from the frame
 by the shared :class:`~mdgran.chain.ChainModel`, so every backend's ledger means the same thing.
 Writing output, progress and energy checks are reporters (see :mod:`mdgran.simulation`), not
@@ -54,12 +56,10 @@ class Event:
 
 @dataclass(slots=True)
 class Frame:
-    """One stored output time.  ``ledger_block``: None, or the
-    :class:`LedgerBlock` of the block of frames this one came in (a backend that makes
-    frames by blocks, the fast one, computes their ledgers together), this frame being its
-    row ``block_row``; the driver then reads the frame's ledger there instead of computing
-    it.  A frame made from another with other states (``dataclasses.replace``) must set
-    ``ledger_block=None``."""
+    """One stored output time.  ``block``: None, or the :class:`Frames` this frame is row
+    ``block_row`` of (a backend that makes frames by blocks, the fast one); the frame's
+    ledger is then the block's row (computed with the block's).  A frame made from another
+    with other states (``dataclasses.replace``) must set ``block=None``."""
 
     step: int
     time: float
@@ -69,40 +69,86 @@ class Frame:
     dissipated_viscous: float
     dissipated_hysteresis: float
     events: list = field(default_factory=list)  # Events in (previous frame time, time]
-    ledger_block: "LedgerBlock | None" = None
+    block: "Frames | None" = None
     block_row: int = 0
     external_work: float = 0.0  # work of the force pulse and base motion (mdgran.drive)
 
     def ledger(self, model) -> dict:
         """The energy ledger of this frame (:meth:`~mdgran.chain.ChainModel.ledger` of
         ``model``, the backend's), from its block's if it has one (bitwise the same)."""
-        if self.ledger_block is not None:
-            return self.ledger_block[self.block_row]
+        if self.block is not None:
+            return self.block.ledger_row(self.block_row)
         return model.ledger(self.x, self.v, self.closed, self.dissipated_viscous,
                             self.dissipated_hysteresis, self.external_work, self.time)
 
 
-class LedgerBlock:
-    """The energy ledgers of a block of ``F`` frames, computed together
-    (:meth:`~mdgran.chain.ChainModel.ledger_rows`: bitwise each frame's own ledger) when the
-    first is read: ``block[k]`` is frame ``k``'s ledger dict.  Built from the frames' states,
-    ``x``, ``v`` [F, n], ``closed`` [F, n_contacts], the dissipated energies [F] (then,
-    optionally, the external work and the times [F]), which must not change after."""
+class Frames:
+    """``F`` consecutive frames as arrays: what :meth:`Backend.blocks` yields and the driver
+    hands its reporters (``report_block``; frame by frame to a reporter with ``report``
+    only).
 
-    __slots__ = ("_model", "_states", "_rows")
+    ``step`` [F] int, ``time`` [F]; ``x``, ``v`` [F, n]; ``closed`` [F, n_contacts] bool;
+    ``dissipated_viscous``, ``dissipated_hysteresis`` [F]; ``external_work`` [F] or None
+    (no excitation: 0); ``events``: the :class:`Event` s of the F frames in order, the first
+    ``event_ends[k]`` of them in frames ``0 .. k``.  The arrays are the block's own: nobody
+    changes them after.  :meth:`ledger` is computed once, for every frame together
+    (:meth:`~mdgran.chain.ChainModel.ledger_block`: bitwise each frame's own ledger)."""
 
-    def __init__(self, model, x, v, closed, dissipated_viscous, dissipated_hysteresis,
-                 external_work=None, t=None):
-        self._model = model
-        self._states = (x, v, closed, dissipated_viscous, dissipated_hysteresis,
-                        external_work, t)
-        self._rows = None
+    __slots__ = ("model", "step", "time", "x", "v", "closed", "dissipated_viscous",
+                 "dissipated_hysteresis", "external_work", "events", "event_ends",
+                 "_ledger", "_rows")
 
-    def __getitem__(self, k: int) -> dict:
+    def __init__(self, model, step, time, x, v, closed, dissipated_viscous,
+                 dissipated_hysteresis, external_work, events, event_ends, ledger=None):
+        self.model = model
+        self.step, self.time, self.x, self.v, self.closed = step, time, x, v, closed
+        self.dissipated_viscous = dissipated_viscous
+        self.dissipated_hysteresis = dissipated_hysteresis
+        self.external_work = external_work
+        self.events, self.event_ends = events, event_ends
+        self._ledger, self._rows = ledger, None
+
+    @classmethod
+    def of(cls, frame: Frame, model) -> "Frames":
+        """The block of the one ``frame`` (its ledger: ``frame.ledger(model)``)."""
+        led = {k: np.array([v]) for k, v in frame.ledger(model).items()}
+        return cls(model, np.array([frame.step]), np.array([frame.time]), frame.x[None],
+                   frame.v[None], frame.closed[None], np.array([frame.dissipated_viscous]),
+                   np.array([frame.dissipated_hysteresis]), np.array([frame.external_work]),
+                   list(frame.events), np.array([len(frame.events)]), ledger=led)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def ledger(self) -> dict:
+        """``{term: [F] array}``: the energy ledger of every frame (computed on first use)."""
+        if self._ledger is None:
+            t = self.time if self.external_work is not None else None
+            self._ledger = self.model.ledger_block(
+                self.x, self.v, self.closed, self.dissipated_viscous,
+                self.dissipated_hysteresis, self.external_work, t)
+        return self._ledger
+
+    def ledger_row(self, k: int) -> dict:
+        """Frame ``k``'s ledger as :meth:`~mdgran.chain.ChainModel.ledger` gives it (floats)."""
         if self._rows is None:
-            self._rows = self._model.ledger_rows(*self._states)
-            self._states = None
+            led = self.ledger()
+            names = tuple(led)
+            self._rows = [dict(zip(names, row))
+                          for row in zip(*(led[name].tolist() for name in names))]
         return self._rows[k]
+
+    def frame_events(self, k: int) -> list:
+        """The events of frame ``k``: those in (frame ``k - 1``'s time, its time]."""
+        lo = int(self.event_ends[k - 1]) if k else 0
+        return self.events[lo:int(self.event_ends[k])]
+
+    def frame(self, k: int) -> Frame:
+        """Frame ``k`` (its arrays are views of the block's rows)."""
+        work = 0.0 if self.external_work is None else float(self.external_work[k])
+        return Frame(int(self.step[k]), float(self.time[k]), self.x[k], self.v[k],
+                     self.closed[k], float(self.dissipated_viscous[k]),
+                     float(self.dissipated_hysteresis[k]), self.frame_events(k), self, k, work)
 
 
 def scene_features(scene, model) -> list:
@@ -223,6 +269,13 @@ class Backend:
     def frames(self, resume: dict | None = None) -> Iterator[Frame]:  # pragma: no cover
         """Yield frames from t = 0, or from just after a checkpoint (``resume``)."""
         raise NotImplementedError
+
+    def blocks(self, resume: dict | None = None) -> Iterator[Frames]:
+        """:meth:`frames` as blocks of consecutive frames (what the driver iterates): here
+        one frame a block; a backend that computes frames by blocks yields them whole.  After
+        a block, :meth:`checkpoint_state` is the state at its last frame."""
+        for frame in self.frames(resume):
+            yield Frames.of(frame, self.model)
 
     def checkpoint_state(self) -> dict | None:
         """The state to continue from the last yielded frame, or None if the backend cannot

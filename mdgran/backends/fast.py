@@ -41,7 +41,6 @@ import math
 import os
 import time as _time
 from functools import lru_cache
-from itertools import repeat
 
 import numba
 import numpy as np
@@ -50,8 +49,7 @@ from ..contact import ContactTable
 from ..contact_scalar import schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
-from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
-                   LedgerBlock)
+from .base import ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError
 
 EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
@@ -284,24 +282,25 @@ class FastBackend(Backend):
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
         so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
         ``closed``, ``d_hyst``, ``i_out``."""
-        frame, a, sums, k = self._last  # a, sums: the rows of the frame's block
-        ledger = [frame.dissipated_viscous, sums[k, 2]]
+        block, a, sums, k = self._last  # a, sums: the kernel's rows of the frame's block
+        ledger = [block.dissipated_viscous[k], sums[k, 2]]
         if self.model.drive is not None:
             ledger += [sums[k, 3], sums[k, 4]]
-        y = np.concatenate([frame.x, frame.v, a[k], ledger])
-        return {"t": float(self._out_times[frame.step]), "y": y,
-                "closed": frame.closed.copy(), "d_hyst": frame.dissipated_hysteresis,
-                "i_out": int(frame.step)}
+        y = np.concatenate([block.x[k], block.v[k], a[k], ledger])
+        return {"t": float(self._out_times[block.step[k]]), "y": y,
+                "closed": block.closed[k].copy(), "d_hyst": float(block.dissipated_hysteresis[k]),
+                "i_out": int(block.step[k])}
 
-    def _frame(self, i_out, t, events) -> Frame:
-        """Frame ``i_out`` at time ``t`` of the current state (copies)."""
+    def _first_frame(self) -> Frames:
+        """The frame at t = 0 of the current state (copies), a block of one."""
         now = self._current()
         x, v = now.x.copy(), now.v.copy()
-        self._check_finite(x[None], v[None], [t])
-        return Frame(step=int(i_out), time=float(t), x=x, v=v, closed=self.closed.copy(),
-                     dissipated_viscous=self._count["d_viscous"].item(),
-                     dissipated_hysteresis=self._count["d_hysteresis"].item(), events=events,
-                     external_work=float(self.counters["work"]))
+        self._check_finite(x[None], v[None], [0.0])
+        frame = Frame(step=0, time=0.0, x=x, v=v, closed=self.closed.copy(),
+                      dissipated_viscous=self._count["d_viscous"].item(),
+                      dissipated_hysteresis=self._count["d_hysteresis"].item(),
+                      events=self._take_events(), external_work=float(self.counters["work"]))
+        return Frames.of(frame, self.model)
 
     @staticmethod
     def _check_finite(x, v, times):
@@ -315,7 +314,16 @@ class FastBackend(Backend):
 
     # ---- main loop ------------------------------------------------------------------------
     def frames(self, resume: dict | None = None):
-        """Integrate the scene; yield a Frame at every output time (see the module doc)."""
+        """Integrate the scene; yield a Frame at every output time (:meth:`blocks`, unpacked)."""
+        for block in self.blocks(resume):
+            last = self._last
+            for k in range(len(block)):
+                self._last = last[:3] + (k,)
+                yield block.frame(k)
+
+    def blocks(self, resume: dict | None = None):
+        """Integrate the scene; yield the frames (:class:`~mdgran.backends.base.Frames`) of
+        each call of the compiled loop together (the frame at t = 0 alone)."""
         wall0 = _time.perf_counter()
         out_times = self._out_times = self.output_times()  # once (checkpoint_state reads it)
         n = self.model.n
@@ -331,10 +339,10 @@ class FastBackend(Backend):
             cnt["power"] = fk.init_acc(self.flags, self.params, now, self.ks)
             self._check()
             i_out = 0
-            frame = self._frame(0, 0.0, self._take_events())
+            first = self._first_frame()
             power = self._count["power"].item()  # as a block's row: a [1, n], sums [1, 5]
-            self._last = (frame, now.a.copy()[None], np.array([[0.0, 0.0, power, 0.0, 0.0]]), 0)
-            yield frame
+            self._last = (first, now.a.copy()[None], np.array([[0.0, 0.0, power, 0.0, 0.0]]), 0)
+            yield first
         else:
             y = np.asarray(resume["y"], dtype=float)
             now = self._current()
@@ -347,40 +355,31 @@ class FastBackend(Backend):
             i_out = int(resume["i_out"])
             cnt["step"] = i_out * self.steps_per_frame
         try:
-            yield from self._frames_from(i_out + 1, out_times, kernel_args)
+            yield from self._blocks_from(i_out + 1, out_times, kernel_args)
         finally:
             self.stats["wall_time_s"] = _time.perf_counter() - wall0
 
-    def _block_frames(self, i, block, done, times) -> tuple[list, int]:
-        """Frames ``i .. i + done - 1``, of the first ``done`` rows of ``block`` (their arrays
-        are views of its rows; their ledgers are computed together when the driver reads the
-        first, :class:`~mdgran.backends.base.LedgerBlock`), each with its events (the pending
-        ones first); and the log's count of events up to the last of them."""
-        xs, vs, states = block.x[:done], block.v[:done], block.closed[:done]
-        sums = block.sums[:done]  # (D_viscous, D_hysteresis, power, W, P_ext) at each frame
-        driven = self.model.drive is not None
-        ledgers = LedgerBlock(self.model, xs, vs, states, sums[:, 0], sums[:, 1],
-                              sums[:, 3] if driven else None, np.array(times) if driven else None)
-        cols = sums.T.tolist()  # map, not a loop unpacking rows: 0.8 us a frame, not 1.3
-        frames = list(map(Frame, range(i, i + done), times, xs, vs, states, cols[0], cols[1],
-                          [[] for _ in range(done)], repeat(ledgers), range(done), cols[3]))
+    def _block_events(self, block, done) -> tuple[list, np.ndarray, int]:
+        """The events of the first ``done`` frames of ``block`` in order (the pending ones
+        first; each frame's sorted by time), how many of them belong to frames ``0 .. k``
+        (``[done]``), and the log's count of events up to the last frame."""
         ends = block.counts[:done, 0]  # the log's count of events at each frame
         starts = np.concatenate(([0], ends[:-1]))
+        events, self._pending = self._pending, []  # an earlier call's unfinished frame's
+        first = len(events)
         for k in np.flatnonzero(ends > starts).tolist():  # the frames with events
-            frames[k].events = self._events(int(starts[k]), int(ends[k]))
-        if self._pending and frames:  # events of an earlier call's unfinished frame
-            frames[0].events = self._pending + frames[0].events
-            self._pending = []
-        return frames, (int(ends[-1]) if done else 0)
+            events += self._events(int(starts[k]), int(ends[k]))
+        return events, ends + first, (int(ends[-1]) if done else 0)
 
-    def _frames_from(self, i, out_times, kernel_args):
+    def _blocks_from(self, i, out_times, kernel_args):
         """Frames ``i ..`` to the end: the kernel runs a block of frames per call (about
-        BLOCK_BEAD_STEPS bead-steps), their states copied into a fresh :class:`FrameBlock`
-        (the frames' arrays are views of its rows, and their ledgers are computed together
-        when the driver asks for the first: :class:`~mdgran.backends.base.LedgerBlock`)."""
+        BLOCK_BEAD_STEPS bead-steps), their states copied into a fresh
+        :class:`~mdgran.backends.fast_kernel.FrameBlock`, whose rows the yielded
+        :class:`~mdgran.backends.base.Frames` holds (its ledger computed when first asked)."""
         n, m, spf, stats = self.model.n, self.model.n_contacts, self.steps_per_frame, self.stats
         status, events = self._count["status"], self._count["events"]
         per_call = max(1, int(BLOCK_BEAD_STEPS // (n * spf)))
+        driven = self.model.drive is not None
         clock = _time.perf_counter
         while i < len(out_times):
             nframes = min(per_call, len(out_times) - i)
@@ -392,7 +391,7 @@ class FastBackend(Backend):
             if self.flags.threaded:
                 note_threads_ran()
             stats["kernel_s"] += clock() - k0
-            times = out_times[i:i + done].tolist()
+            times = out_times[i:i + done]
             bad = None  # a non-finite state: the frames before it, then the error
             try:
                 self._check_finite(block.x[:done], block.v[:done], times)
@@ -400,14 +399,18 @@ class FastBackend(Backend):
                 bad = exc
                 done = next(k for k in range(done) if not np.all(
                     np.isfinite(block.x[k]) & np.isfinite(block.v[k])))
-            frames, lo = self._block_frames(i, block, done, times)
-            a, sums = block.a, block.sums  # for checkpoint_state: sums[k, 2] is the power
-            substeps = block.counts[:done, 1].tolist()
-            for k, frame in enumerate(frames):
-                stats["steps"] = (i + k) * spf
-                stats["event_substeps"] = substeps[k]
-                self._last = (frame, a, sums, k)
-                yield frame
+            evs, ends, lo = self._block_events(block, done)
+            if done:
+                sums = block.sums[:done]  # (D_viscous, D_hysteresis, power, W, P_ext) each frame
+                frames = Frames(self.model, np.arange(i, i + done), times[:done], block.x[:done],
+                                block.v[:done], block.closed[:done], sums[:, 0], sums[:, 1],
+                                sums[:, 3] if driven else None, evs, ends)
+                stats["steps"] = (i + done - 1) * spf
+                stats["event_substeps"] = int(block.counts[done - 1, 1])
+                self._last = (frames, block.a, block.sums, done - 1)
+                yield frames
+            else:
+                self._pending = evs
             if bad is not None:
                 raise bad
             if status[0] == fk.EVENTS_FULL:  # the unfinished frame's events so far

@@ -1,0 +1,73 @@
+"""The driver takes frames by blocks (issue 18): a reporter with ``report_block`` gets each
+block whole, one with ``report`` alone gets the same frames one by one, with the ledger that
+ChainModel.ledger gives each frame; the run's ledger error is the largest over every frame,
+and NaN once any frame's is NaN."""
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mdgran.chain import model_from_scene
+from mdgran.scene import load_scene
+from mdgran.simulation import run, worst
+
+
+class ByFrame:
+    def __init__(self):
+        self.frames, self.ledgers = [], []
+
+    def report(self, frame, ledger):
+        self.frames.append(frame)
+        self.ledgers.append(ledger)
+
+    def close(self, status):
+        self.status = status
+
+
+class ByBlock:
+    def __init__(self):
+        self.blocks = []
+
+    def report_block(self, block):
+        self.blocks.append(block)
+
+    def close(self, status):
+        self.status = status
+
+
+def test_block_and_frame_reporters_see_the_same_frames():
+    sc = load_scene("micro-star", [("run.duration", 60.0)])
+    one, whole = ByFrame(), ByBlock()
+    res = run(sc, "fast", reporters=[one, whole])
+    assert one.status == whole.status == res.status == "complete"
+    tr = res.trajectory
+    assert len(one.frames) == sum(map(len, whole.blocks)) == len(tr.time) == 601
+    assert len(whole.blocks) < len(one.frames)  # by blocks indeed
+    x = np.array([f.x for f in one.frames])
+    assert x.tobytes() == np.concatenate([b.x for b in whole.blocks]).tobytes() == tr.x.tobytes()
+    events = [(e.time, e.contact, e.kind) for f in one.frames for e in f.events]
+    assert events == list(zip(tr.ev_time, tr.ev_contact, tr.ev_kind)) and len(events) > 5
+    for f in one.frames:  # each frame's events in (previous frame, frame]
+        assert all(f.time - 0.1 < e.time <= f.time for e in f.events)
+    m = model_from_scene(sc)
+    for f, led in zip(one.frames, one.ledgers):
+        own = m.ledger(f.x, f.v, f.closed, f.dissipated_viscous, f.dissipated_hysteresis)
+        assert [float(a).hex() for a in led.values()] == [float(b).hex() for b in own.values()]
+    for name in tr.ledger:
+        col = np.array([led[name] for led in one.ledgers])
+        assert col.tobytes() == tr.ledger[name].tobytes(), name
+
+
+errors = st.lists(st.lists(st.floats(0.0, 1e3) | st.just(float("nan")), min_size=1,
+                           max_size=5), min_size=1, max_size=6)
+
+
+@given(errors)
+def test_worst_error_is_the_max_over_every_frame_and_nan_once_any_is(blocks):
+    got = 0.0
+    for b in blocks:
+        got = worst(got, np.array(b))
+    flat = [e for b in blocks for e in b]
+    if any(e != e for e in flat):
+        assert got != got
+    else:
+        assert got == max([0.0, *flat])
