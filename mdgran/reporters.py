@@ -375,6 +375,7 @@ class H5MDWriter:
         par.attrs["mpi_world_size"] = np.int64(self.mpi_world_size())
         chain = f.create_group("particles/chain")
         self._series = {}
+        self._clock = None  # the step and time every series shares (_make_series)
         n = len(self.bead_ids)
         if self.stride != 1:
             chain.attrs["bead_stride"] = np.int64(self.stride)
@@ -389,7 +390,7 @@ class H5MDWriter:
             box.attrs["dimension"] = np.int32(3)
             box.attrs["boundary"] = np.array([b"none"] * 3)
             self._series["position"] = self._make_series(chain, "position", (n, 3),
-                                                         filters=self.filters)
+                                                         filters=self.filters, own_clock=True)
             if sc is not None:
                 self._series["position"]["value"].attrs["unit"] = "nm"
                 self._series["position"]["time"].attrs["unit"] = "ps"
@@ -436,19 +437,28 @@ class H5MDWriter:
         ev.attrs["kind"] = "1 = close (snap-to-contact), 0 = open (snap-off)"
         ev.attrs["contact"] = "contact i joins bead i-1 and bead i (beads 0, n+1: walls)"
 
-    @staticmethod
-    def _make_series(parent, name, shape, dtype="f8", filters=None):
+    def _make_series(self, parent, name, shape, dtype="f8", filters=None, own_clock=False):
         """A H5MD time series ``name`` with frames of ``shape``: ``step``, ``time`` and a
         ``value`` chunked by :func:`chunk_shape`, with the h5py ``filters``
-        (:data:`COMPRESSION`) if given."""
+        (:data:`COMPRESSION`) if given.  Every series sampled at the frames shares one
+        ``step`` and one ``time`` (HDF5 hard links to the first series', as H5MD allows:
+        written once per flush); ``own_clock``: datasets of its own (``position``, whose
+        time is in ps)."""
         g = parent.create_group(name)
-        return {
-            "step": g.create_dataset("step", (0,), maxshape=(None,), dtype="i8", chunks=(4096,)),
-            "time": g.create_dataset("time", (0,), maxshape=(None,), dtype="f8", chunks=(4096,)),
-            "value": g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape,
-                                      dtype=dtype, chunks=chunk_shape(shape, np.dtype(
-                                          dtype).itemsize), **(filters or {})),
-        }
+        clock = None if own_clock else self._clock
+        if clock is None:
+            clock = {"step": g.create_dataset("step", (0,), maxshape=(None,), dtype="i8",
+                                              chunks=(4096,)),
+                     "time": g.create_dataset("time", (0,), maxshape=(None,), dtype="f8",
+                                              chunks=(4096,))}
+            if not own_clock:
+                self._clock = clock
+        else:
+            g["step"], g["time"] = clock["step"], clock["time"]
+        value = g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape, dtype=dtype,
+                                 chunks=chunk_shape(shape, np.dtype(dtype).itemsize),
+                                 **(filters or {}))
+        return {**clock, "value": value}
 
     def _contact_names(self, obs=None) -> list:
         """The per-contact series this file holds: ``closed`` always (unless ``obs``, an
@@ -540,12 +550,15 @@ class H5MDWriter:
         self._last_checkpoint = _time.perf_counter()
 
     def _append(self, path, series, steps, times, values):
-        k0 = series["step"].shape[0]
+        """Append rows to ``series``; a ``step`` or ``time`` shared with a series appended
+        before in this flush (:meth:`_make_series`) already has them."""
+        k0 = series["value"].shape[0]
         k1 = k0 + len(steps)
         for key, data in (("step", steps), ("time", times), ("value", values)):
             ds = series[key]
-            ds.resize(k1, axis=0)
-            ds[k0:k1] = data
+            if ds.shape[0] != k1:
+                ds.resize(k1, axis=0)
+                ds[k0:k1] = data
             if self._digest is not None:
                 self._digest.update(f"{path}/{key}", data, ds.dtype)
 
@@ -628,7 +641,7 @@ class H5MDWriter:
         self.f.close()
 
     def _forget_datasets(self):
-        self._series, self._ev = {}, {}
+        self._series, self._ev, self._clock = {}, {}, None
 
 
 from .progress import ProgressReporter  # noqa: E402,F401 - moved to mdgran.progress

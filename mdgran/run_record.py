@@ -291,6 +291,29 @@ class Run:
         return f"Run({', '.join(parts)})"
 
 
+def dataset_paths(f) -> list:
+    """The path of every dataset of the open HDF5 file ``f`` (sorted), one reached by several
+    hard links under each: the time series of an mdgran file share one ``step`` and ``time``,
+    and ``particles/beads/position`` is ``particles/chain/position``, which ``visititems``
+    lists once."""
+    import h5py
+
+    out = []
+
+    def walk(group, prefix, above):
+        for name in group:
+            if not isinstance(group.get(name, getlink=True), h5py.HardLink):
+                continue
+            item, path = group[name], prefix + name
+            if isinstance(item, h5py.Dataset):
+                out.append(path)
+            elif isinstance(item, h5py.Group) and item.id not in above:  # no cycles
+                walk(item, path + "/", above + [item.id])
+
+    walk(f, "", [f.id])
+    return sorted(out)
+
+
 def read_h5(path) -> Run:
     """Read an mdgran H5MD file back into a :class:`Run` (also ``mdgran.read``).  The contact
     states come from ``/observables/contacts/closed``; a file written without them (an older

@@ -133,9 +133,9 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
     with ``output.contacts``; of the stored beads, ``output.bead_stride``),
     the frames kept
-    in memory (``keep``: x and v, and the copies made for the trajectory, plus ~500 bytes of
-    Python objects per frame); on disk x, v (and positions, and the per-contact series) and
-    the six observables, each with its step and time."""
+    in memory (``keep``: x and v, and the copies made for the trajectory, plus the frame's
+    time and ledger, 64 bytes); on disk x, v (and positions, and the per-contact series), the
+    six observables and the step and time they share (positions: a time of their own)."""
     from .reporters import buffer_frames, stored_bead_count
 
     n = int(scene.data["chain"]["n"])
@@ -147,9 +147,8 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     con = (17.0 if detail else 1.0) / 8.0  # per contact: 2 f8 + 1 i1, or the i1 state alone
     block = min(frames, buffer_frames(8.0 * ns * (2 + pos + con)))
     memory = 8.0 * n * 10 + 8.0 * ns * block * (4 + pos + con) + (
-        frames * (4 * 8.0 * n + 500) if keep else 0)
-    disk = frames * (8.0 * ns * (2 + pos + con) + 16.0 * (2 + (pos > 0) + (3 if detail else 1))
-                     + 6 * 24.0)
+        frames * (4 * 8.0 * n + 64.0) if keep else 0)
+    disk = frames * (8.0 * ns * (2 + pos + con) + 16.0 * (1 + (pos > 0)) + 6 * 8.0)
     return {"n": n, "frames": frames, "memory": memory, "disk": disk}
 
 

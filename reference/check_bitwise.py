@@ -134,11 +134,10 @@ def datasets(path: Path) -> dict:
     """Every dataset of an HDF5 file, by its path, as a numpy array."""
     import h5py
 
-    found = {}
+    from mdgran.run_record import dataset_paths
+
     with h5py.File(path, "r") as f:
-        f.visititems(lambda key, obj: found.__setitem__(key, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
-    return found
+        return {key: f[key][()] for key in dataset_paths(f)}
 
 
 def same(a, b) -> bool:

@@ -65,10 +65,11 @@ def h5_datasets(path) -> dict:
     """Dataset name -> array, and ``@parameters`` -> the /parameters attributes."""
     import h5py
 
+    from mdgran.run_record import dataset_paths
+
     out = {}
     with h5py.File(path, "r") as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
+        out.update((name, f[name][()]) for name in dataset_paths(f))
         if "parameters" in f:
             out["@parameters"] = {k: (v.decode() if isinstance(v, bytes) else v)
                                   for k, v in f["parameters"].attrs.items()}

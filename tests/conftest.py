@@ -13,11 +13,10 @@ def h5_datasets(path) -> dict:
     """Every dataset of an HDF5 file: path -> its values."""
     import h5py
 
-    out = {}
+    from mdgran.run_record import dataset_paths
+
     with h5py.File(path) as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
-    return out
+        return {name: f[name][()] for name in dataset_paths(f)}
 
 
 def pytest_collection_modifyitems(config, items):

@@ -16,7 +16,7 @@ from mdgran.chain import model_from_scene
 from mdgran.reporters import H5MDWriter
 from mdgran.scene import load_scene
 from mdgran.simulation import run
-from mdgran.run_record import read_h5
+from mdgran.run_record import dataset_paths, read_h5
 
 T_END, T_STOP = 40.0, 30.0  # micro-star: 14 events by t = 40 (snap-offs and a re-closure)
 SERIES = ("compression", "force", "closed")
@@ -102,12 +102,9 @@ def test_contact_series_match_independent_values(runs):
 
 
 def _datasets(path):
-    out = {}
     with h5py.File(path, "r") as f:
-        def take(name, obj):
-            if isinstance(obj, h5py.Dataset) and not name.startswith("checkpoint"):
-                out[name] = obj[()]
-        f.visititems(take)
+        out = {name: f[name][()] for name in dataset_paths(f)
+               if not name.startswith("checkpoint")}
         attrs = {k: v for k, v in f["parameters"].attrs.items() if k != "backend_stats"}
     return out, attrs
 
@@ -225,3 +222,47 @@ def test_mpi_ranks_of_a_two_rank_lammps_run(tmp_path):
         assert f["parameters"].attrs["mpi_ranks"] == 2
         assert f["parameters"].attrs["mpi_world_size"] == 2
         assert f["observables/contacts/closed/value"].shape == (11, 21)
+
+
+def _series_groups(f) -> list:
+    """Every time series group (one with a ``value``) by every path that reaches it."""
+    return sorted(p[:-len("/value")] for p in dataset_paths(f) if p.endswith("/value"))
+
+
+def test_series_share_one_clock(runs):
+    """Every time series sampled at the frames holds the same step and time datasets (hard
+    links: one HDF5 object), the frame numbers and their times; position keeps its own time
+    (ps with scales)."""
+    with h5py.File(runs["whole"], "r") as f:
+        groups = _series_groups(f)
+        assert len(groups) >= 10 and "particles/chain/position" in groups
+        shared = [g for g in groups if not g.endswith("/position")]
+        clock = f[f"{shared[0]}/step"].id, f[f"{shared[0]}/time"].id
+        for g in shared:
+            assert (f[f"{g}/step"].id, f[f"{g}/time"].id) == clock, g
+            assert f[f"{g}/value"].shape[0] == f[f"{g}/step"].shape[0]
+        step = f[f"{shared[0]}/step"][()]
+        np.testing.assert_array_equal(step, np.arange(int(T_END / 0.1) + 1))
+        np.testing.assert_allclose(f[f"{shared[0]}/time"][()], 0.1 * step, rtol=1e-12)
+        assert f["particles/chain/position/step"].id != clock[0]
+
+
+def test_resume_of_a_file_with_a_clock_per_series(runs, tmp_path, monkeypatch):
+    """A checkpoint written with a step and time per series (mdgran before the shared clock)
+    resumes into the same datasets as an uninterrupted run."""
+    sc = runs["scene"]
+    own = H5MDWriter._make_series
+    with monkeypatch.context() as m:
+        m.setattr(H5MDWriter, "_make_series",
+                  lambda self, *a, **k: own(self, *a, **{**k, "own_clock": True}))
+        with pytest.raises(KeyboardInterrupt):
+            run(sc, "reference", out=tmp_path / "r.h5", checkpoint_every=0.0,
+                reporters=[InterruptAt(T_STOP)])
+    with h5py.File(tmp_path / "r.h5.partial", "r") as f:
+        assert f["observables/total_energy/step"].id != f["particles/chain/velocity/step"].id
+    run(sc, "reference", out=tmp_path / "r.h5", checkpoint_every=0.0, resume=True, keep=False)
+    a, _ = _datasets(tmp_path / "r.h5")
+    b, _ = _datasets(runs["whole"])
+    assert sorted(a) == sorted(b)
+    for key in b:
+        assert a[key].tobytes() == b[key].tobytes(), key

@@ -10,6 +10,8 @@ import time
 import h5py
 import numpy as np
 
+from mdgran.run_record import dataset_paths
+
 
 def test_sigkill_leaves_no_file(tmp_path):
     out = tmp_path / "killed.h5"
@@ -31,10 +33,8 @@ def test_sigkill_leaves_no_file(tmp_path):
 
 
 def _datasets(path):
-    out = {}
     with h5py.File(path) as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) else None)
+        out = {name: f[name][()] for name in dataset_paths(f)}
         attrs = dict(f["parameters"].attrs)
     return out, attrs
 
