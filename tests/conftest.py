@@ -1,7 +1,18 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from mdgran.scene import Scene, resolve
+
+# Hypothesis draws the same cases on every run ("ci", the default: the test command is
+# reproducible, a red CI is a real failure and comes back on the next run); MDGRAN_HYPOTHESIS=
+# explore draws new ones each run (a search for failures: a case it finds becomes a fixed
+# example or a fix).
+settings.register_profile("ci", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("MDGRAN_HYPOTHESIS", "ci"))
 
 
 def make_scene(**sections) -> Scene:
