@@ -26,8 +26,9 @@ outward), each with the events since the previous frame (contract numbering); a 
 is the whole state at the last frame, and a resumed run is bitwise identical to an
 uninterrupted one.  One call of the compiled loop runs a block of frames (about
 ``BLOCK_BEAD_STEPS`` bead-steps, at least one frame) and copies each frame's state into a
-:class:`~mdgran.backends.fast_kernel.FrameBlock`; the frames' ``x``, ``v``, ``closed`` are
-views of its rows, so a small chain's frames cost the Python of building a Frame alone.
+:class:`~mdgran.backends.fast_kernel.FrameBlock`; :meth:`FastBackend.blocks` (what the driver
+iterates) yields its rows as one :class:`~mdgran.backends.base.Frames`, so a small chain's
+frames cost no Python each; :meth:`FastBackend.frames` unpacks them.
 
 Example::
 
@@ -53,7 +54,7 @@ from .base import ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, Inte
 
 EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
-#: frames of 10 steps per call: the per-frame Python work is then building the Frame alone)
+#: frames of 10 steps per call, handed over as one block); a checkpoint falls between calls
 BLOCK_BEAD_STEPS = 1_000_000
 
 
