@@ -93,7 +93,8 @@ def deferred():
 
 
 class FrameSections:
-    """Hold SIGINT and SIGTERM while the driver hands a frame to its reporters.
+    """Hold SIGINT and SIGTERM while the driver hands a frame to its reporters, or while numba
+    compiles (:func:`in_compiler`).
 
     A signal that arrives between the backend yielding a frame and the last reporter taking it
     would stop the run with the backend one frame ahead of the writer, whose checkpoint (the
@@ -101,7 +102,8 @@ class FrameSections:
     ``with FrameSections() as sections:`` the driver sets ``sections.inside = True`` before it
     computes a frame's ledger and calls ``sections.leave()`` once every reporter has the frame:
     a signal in between is delivered there, as the handler in place before would have acted on
-    it.  Elsewhere (while the backend integrates) signals act at once.  Installed once per run
+    it.  A signal that arrives while numba compiles is held likewise, to the end of the next
+    section (or of the run).  Elsewhere (while the backend integrates) signals act at once.  Installed once per run
     (a handler swap costs ~25 us; entering and leaving a section, an attribute each); a signal
     still at its default action (SIGTERM outside the command line: the process ends) is left
     alone.
@@ -121,7 +123,7 @@ class FrameSections:
         return self
 
     def _on_signal(self, signum, frame):
-        if self.inside:
+        if self.inside or in_compiler(frame):
             if self.held is None:
                 self.held = signum
             return
@@ -138,5 +140,25 @@ class FrameSections:
         self.inside = False
         for s, h in self.before.items():
             signal.signal(s, h)
-        self.before = {}
+        before, self.before = self.before, {}
+        if self.held is not None and exc[0] is None:  # held in the compiler, the run ended
+            signum, self.held = self.held, None
+            _deliver(signum, before[signum])
         return False
+
+
+#: modules whose code a signal must not interrupt: numba compiles through LLVM, which calls
+#: back into Python through ctypes (an exception raised there is dropped: "Exception ignored
+#: on calling ctypes callback function", and the run went on to exit 0 after a SIGTERM)
+COMPILER_MODULES = ("numba", "llvmlite")
+
+
+def in_compiler(frame) -> bool:
+    """Whether ``frame`` (where a signal arrived) or a caller runs code of
+    :data:`COMPILER_MODULES` (numba compiling a variant on its first use: 15-25 s)."""
+    while frame is not None:
+        name = frame.f_globals.get("__name__", "")
+        if name.split(".", 1)[0] in COMPILER_MODULES:
+            return True
+        frame = frame.f_back
+    return False
