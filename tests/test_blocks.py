@@ -1,10 +1,14 @@
 """The driver takes frames by blocks (issue 18): a reporter with ``report_block`` gets each
 block whole, one with ``report`` alone gets the same frames one by one, with the ledger that
 ChainModel.ledger gives each frame; the run's ledger error is the largest over every frame,
-and NaN once any frame's is NaN."""
+and NaN once any frame's is NaN; the fast backend's calls on a thread of their own change
+nothing."""
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
+from conftest import h5_datasets
 
 from mdgran.chain import model_from_scene
 from mdgran.scene import load_scene
@@ -71,3 +75,43 @@ def test_worst_error_is_the_max_over_every_frame_and_nan_once_any_is(blocks):
         assert got != got
     else:
         assert got == max([0.0, *flat])
+
+
+@pytest.mark.parametrize("options", [{}, {"delta_max": 2.0}])
+def test_kernel_thread_changes_nothing(monkeypatch, tmp_path, options):
+    """The fast backend runs its next call of the compiled loop on a thread of its own while
+    the driver takes the block before (with two cores or more): the same frames, events,
+    ledgers, file and status as calls in line, also when a call ends the run with an error
+    (delta_max = 2: the table is left at t = 0.17, in the second call, on the thread)."""
+    import mdgran.backends.fast as fast
+
+    submitted = []
+
+    class Counting(fast.ThreadPoolExecutor):
+        def submit(self, *args, **kw):
+            submitted.append(args[1:])
+            return super().submit(*args, **kw)
+
+    sc = load_scene("micro-star", [("run.duration", 40.0)])
+    monkeypatch.setattr(fast, "BLOCK_BEAD_STEPS", 800)  # a frame a call
+    monkeypatch.setattr(fast, "ThreadPoolExecutor", Counting)
+    results = []
+    for cores in (2, 1):
+        monkeypatch.setattr(fast, "usable_threads", lambda threads, c=cores: c)
+        res = run(sc, "fast", out=tmp_path / f"{cores}.h5", raise_errors=False, **options)
+        results.append(res)
+        if cores == 2:
+            assert len(submitted) >= (1 if options else 2)  # the thread ran calls
+            submitted.clear()
+    assert not submitted  # one core: every call in line
+    a, b = (r.trajectory for r in results)
+    assert results[0].status == results[1].status
+    assert (results[0].status == "complete") == (not options), results[0].status
+    for key in ("time", "x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
+        assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), key
+    for key in a.ledger:
+        assert a.ledger[key].tobytes() == b.ledger[key].tobytes(), key
+    da, db = h5_datasets(tmp_path / "2.h5"), h5_datasets(tmp_path / "1.h5")
+    assert da.keys() == db.keys()
+    for k in da:
+        assert da[k].tobytes() == db[k].tobytes(), k

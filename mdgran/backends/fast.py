@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import os
 import time as _time
+from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
 
 import numba
@@ -99,6 +100,16 @@ def contact_table(law, points: int | None, delta_max: float) -> tuple:
     table = (ContactTable(law, delta_max=delta_max) if points is None
              else ContactTable(law, int(points), delta_max))
     return table, table.error()
+
+
+class _Done:
+    """A call already made, as a future of it."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def result(self):
+        return self.value
 
 
 class FastBackend(Backend):
@@ -372,54 +383,89 @@ class FastBackend(Backend):
             events += self._events(int(starts[k]), int(ends[k]))
         return events, ends + first, (int(ends[-1]) if done else 0)
 
+    def _call(self, kernel_args, i, nframes):
+        """One call of the compiled loop: frames ``i .. i + nframes - 1`` (fewer if it stops
+        early) into a fresh :class:`~mdgran.backends.fast_kernel.FrameBlock`; ``(block,
+        frames done, seconds)``.  It may run on the backend's own thread (:meth:`_blocks_from`):
+        it touches the kernel's buffers, counters and log and the new block alone."""
+        block = fk.new_block(nframes, self.model.n, self.model.n_contacts)
+        k0 = _time.perf_counter()
+        if self.flags.threaded:
+            numba.set_num_threads(self.threads)
+        done = self.advance(*kernel_args, fk.plain(block), i, nframes, self.steps_per_frame,
+                            self.dt)
+        if self.flags.threaded:
+            note_threads_ran()
+        return block, done, _time.perf_counter() - k0
+
     def _blocks_from(self, i, out_times, kernel_args):
         """Frames ``i ..`` to the end: the kernel runs a block of frames per call (about
-        BLOCK_BEAD_STEPS bead-steps), their states copied into a fresh
-        :class:`~mdgran.backends.fast_kernel.FrameBlock`, whose rows the yielded
-        :class:`~mdgran.backends.base.Frames` holds (its ledger computed when first asked)."""
-        n, m, spf, stats = self.model.n, self.model.n_contacts, self.steps_per_frame, self.stats
+        BLOCK_BEAD_STEPS bead-steps, :meth:`_call`), whose rows the yielded
+        :class:`~mdgran.backends.base.Frames` holds (its ledger computed when first asked).
+
+        The next call starts before a block is yielded, once the block's events and status
+        are read: on a thread of its own when the kernel runs on one thread and the process
+        may use two cores or more (the compiled loop releases Python's lock, so the driver's
+        ledger and reporters of this block run beside the next block's steps), in line
+        otherwise.  The results are the same either way (the kernel sees nothing the
+        reporters do)."""
+        spf, stats = self.steps_per_frame, self.stats
         status, events = self._count["status"], self._count["events"]
-        per_call = max(1, int(BLOCK_BEAD_STEPS // (n * spf)))
+        per_call = max(1, int(BLOCK_BEAD_STEPS // (self.model.n * spf)))
         driven = self.model.drive is not None
-        clock = _time.perf_counter
-        while i < len(out_times):
-            nframes = min(per_call, len(out_times) - i)
-            block = fk.new_block(nframes, n, m)
-            k0 = clock()
-            if self.flags.threaded:
-                numba.set_num_threads(self.threads)
-            done = self.advance(*kernel_args, fk.plain(block), i, nframes, spf, self.dt)
-            if self.flags.threaded:
-                note_threads_ran()
-            stats["kernel_s"] += clock() - k0
-            times = out_times[i:i + done]
-            bad = None  # a non-finite state: the frames before it, then the error
-            try:
-                self._check_finite(block.x[:done], block.v[:done], times)
-            except IntegrationError as exc:
-                bad = exc
-                done = next(k for k in range(done) if not np.all(
-                    np.isfinite(block.x[k]) & np.isfinite(block.v[k])))
-            evs, ends, lo = self._block_events(block, done)
-            if done:
-                sums = block.sums[:done]  # (D_viscous, D_hysteresis, power, W, P_ext) each frame
-                frames = Frames(self.model, np.arange(i, i + done), times[:done], block.x[:done],
-                                block.v[:done], block.closed[:done], sums[:, 0], sums[:, 1],
-                                sums[:, 3] if driven else None, evs, ends)
-                stats["steps"] = (i + done - 1) * spf
-                stats["event_substeps"] = int(block.counts[done - 1, 1])
-                self._last = (frames, block.a, block.sums, done - 1)
-                yield frames
-            else:
-                self._pending = evs
-            if bad is not None:
-                raise bad
-            if status[0] == fk.EVENTS_FULL:  # the unfinished frame's events so far
-                count = int(events[0])
-                self._pending += self._events(lo, count)
-                lo = count
-            self.counters["events"] = 0
-            stats["events"] += lo
-            if status[0] != fk.OK:
-                self._check()
-            i += done
+        ahead = (ThreadPoolExecutor(1, thread_name_prefix="mdgran-kernel")
+                 if not self.flags.threaded and usable_threads(0) > 1 else None)
+
+        def start(i, inline=False):
+            args = (kernel_args, i, min(per_call, len(out_times) - i))
+            if ahead is None or inline:
+                return _Done(self._call(*args))
+            return ahead.submit(self._call, *args)
+
+        # the first call in line: it may compile the variant (15-25 s), which Ctrl-C must stop
+        call = start(i, inline=True) if i < len(out_times) else None
+        try:
+            while call is not None:
+                block, done, seconds = call.result()
+                call = None
+                stats["kernel_s"] += seconds
+                times = out_times[i:i + done]
+                error = None  # a non-finite state: the frames before it, then the error
+                try:
+                    self._check_finite(block.x[:done], block.v[:done], times)
+                except IntegrationError as exc:
+                    error = exc
+                    done = next(k for k in range(done) if not np.all(
+                        np.isfinite(block.x[k]) & np.isfinite(block.v[k])))
+                evs, ends, lo = self._block_events(block, done)
+                if not done:
+                    self._pending = evs
+                if status[0] == fk.EVENTS_FULL:  # the unfinished frame's events so far
+                    count = int(events[0])
+                    self._pending += self._events(lo, count)
+                    lo = count
+                self.counters["events"] = 0
+                stats["events"] += lo
+                if error is None and status[0] != fk.OK:
+                    try:
+                        self._check()
+                    except IntegrationError as exc:
+                        error = exc
+                first, i = i, i + done
+                if error is None and i < len(out_times):
+                    call = start(i)
+                if done:
+                    sums = block.sums[:done]  # (D_viscous, D_hysteresis, power, W, P_ext)
+                    frames = Frames(self.model, np.arange(first, i), times[:done],
+                                    block.x[:done], block.v[:done], block.closed[:done],
+                                    sums[:, 0], sums[:, 1], sums[:, 3] if driven else None,
+                                    evs, ends)
+                    stats["steps"] = (i - 1) * spf
+                    stats["event_substeps"] = int(block.counts[done - 1, 1])
+                    self._last = (frames, block.a, block.sums, done - 1)
+                    yield frames
+                if error is not None:
+                    raise error
+        finally:
+            if ahead is not None:
+                ahead.shutdown(wait=True)  # a call under way (an interrupt) ends first

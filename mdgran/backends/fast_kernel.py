@@ -1418,7 +1418,7 @@ def _make_advance(flags, nrt: bool):
                         (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
-    @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt)
+    @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
         return advance_frames(literal, named_params(params), Beads(*buffers), named_state(ks),
                               FrameBlock(*block), first, nframes, spf, dt, run_segments)
