@@ -119,18 +119,18 @@ def shaken_chain(amplitude, duration, base_amp, seed):
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(amplitude=st.floats(-3.0, 3.0).filter(lambda a: abs(a) > 0.05),
+@given(amplitude=st.floats(0.05, 3.0), sign=st.sampled_from([-1.0, 1.0]),
        duration=st.floats(0.2, 5.0), base_amp=st.just(0.0) | st.floats(1e-3, 0.5),
        seed=st.integers(0, 1000))
-def test_driven_ledger_closes_and_backends_agree(amplitude, duration, base_amp, seed):
+def test_driven_ledger_closes_and_backends_agree(amplitude, sign, duration, base_amp, seed):
     """Kinetic + contact + substrate + dissipated - external work stays at E0 within each
     backend's bound (the ledger is an independent conservation law: W is integrated apart
     from the motion), and the fast backend's work and motion follow the reference's up to
-    t = 5 or the first contact event, whichever comes first: a grazing event's time is
-    sensitive to the state (amplitude 1.875, duration 0.3125: positions within 5e-5 before
-    the first snap at t = 2.65, whose time then differs by 1.7e-3 between the backends, and
-    the positions after it by 3e-3)."""
-    sc = shaken_chain(amplitude, duration, base_amp, seed)
+    t = 5 or the first contact event, whichever comes first: within 1e-3, or, where the motion
+    runs into a grazing event (whose approach amplifies any error 20-fold), converging to the
+    reference at second order (amplitude 2.84, duration 0.2: 1.4e-3 at t = 4.75 before a snap
+    at t = 5.48, 3.99x less at dt / 2; amplitude 1.875, duration 0.3125: a snap at t = 2.65)."""
+    sc = shaken_chain(sign * amplitude, duration, base_amp, seed)
     ref, fast = run(sc, "reference"), run(sc, "fast")
     for res in (ref, fast):
         assert res.status == "complete"
@@ -142,7 +142,11 @@ def test_driven_ledger_closes_and_backends_agree(amplitude, duration, base_amp, 
     w_ref = ref.trajectory.ledger["external_work"]
     w_fast = fast.trajectory.ledger["external_work"]
     assert np.abs(w_ref - w_fast)[early].max() < 1e-3 * scale
-    assert np.abs(ref.trajectory.x - fast.trajectory.x)[early].max() < 1e-3
+    apart = np.abs(ref.trajectory.x - fast.trajectory.x)[early].max()
+    if apart >= 1e-3:
+        finer = run(sc, "fast", dt=float(sc.data["run"]["dt"]) / 2).trajectory
+        closer = np.abs(ref.trajectory.x - finer.x)[early].max()
+        assert 3.0 < apart / closer < 5.0, (apart, closer)
     assert w_ref[-1] != 0.0
 
 

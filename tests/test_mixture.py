@@ -277,7 +277,7 @@ def test_random_free_mixtures_conserve_momentum_and_close_the_ledger(s, rho, v0)
     m = np.array(rho) * np.array(s) ** 3
     p = res.trajectory.v @ m
     assert np.abs(p - m[0] * v0).max() < 1e-9 * (1 + m[0] * v0)
-    assert res.status == "complete"
+    assert res.status == "complete" and res.max_ledger_error <= res.ledger_bound
 
 
 # ---- the fast backend --------------------------------------------------------------------------
