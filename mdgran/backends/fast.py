@@ -170,7 +170,8 @@ class FastBackend(Backend):
         self.stats = {"method": "velocity Verlet, " + ("located events" if self.locate
                                                         else "step-quantized events"),
                       "dt": self.dt, "threads": self.threads if self.flags.threaded else 1,
-                      "steps": 0, "events": 0, "event_substeps": 0,
+                      "steps": 0, "events": 0, "event_substeps": 0, "event_windows": 0,
+                      "event_windows_widened": 0,
                       "contact_eval": contact_eval, "wall_time_s": 0.0, "kernel_s": 0.0}
         if contact_eval == "table":
             self.stats["table"] = dict(table_error)
@@ -222,7 +223,7 @@ class FastBackend(Backend):
     def _alloc(self):
         n = self.model.n
         self.buffers = fk.Beads(np.zeros((2, n)), np.zeros((2, n)), np.zeros((2, n)))
-        self.ks = fk.new_state(self.model.n_contacts, EVENT_BUFFER)
+        self.ks = fk.new_state(n, self.model.n_contacts, EVENT_BUFFER)
         self.closed = self.ks.closed
         self.counters = self.ks.counters[0]  # a view: reads and writes go to the kernel's
         # the two buffers as Beads of [n] views, and one-element views of the counters the
@@ -462,6 +463,8 @@ class FastBackend(Backend):
                                     evs, ends)
                     stats["steps"] = (i - 1) * spf
                     stats["event_substeps"] = int(block.counts[done - 1, 1])
+                    stats["event_windows"] = int(block.counts[done - 1, 2])
+                    stats["event_windows_widened"] = int(block.counts[done - 1, 3])
                     self._last = (frames, block.a, block.sums, done - 1)
                     yield frames
                 if error is not None:

@@ -23,14 +23,27 @@ bead is read and written once); two copies of ``(x, v, a)`` alternate as old and
 closed, ``-delta`` when open; positive inside the state) is exactly the quadratic
 ``g(s) = g0 + s g0' + s^2/2 g0''`` along the step.  The pass flags a contact when its end value
 could hide a crossing (``g1 < 0`` or ``g1 < h/2 g'(h)``: a dip below zero inside the step
-implies this, so the filter never misses one).  For flagged contacts the first downward root
-of the quadratic is solved in closed form; the step is redone to the earliest root ``te``,
-where the contact switches (``D_hysteresis += V(delta(te))`` on opening, exact law, as the
-reference does), the accelerations of its two beads and the damping power are updated, and
-the rest of the step ``h - te`` is integrated in the new state (repeated for further events).
-A contact that sits on its switching point after a switch (DMT, Hertz: ``delta_off = 0``) is
-switched back at once if it moves outward (the reference's settle rule); more than
-``MAX_SWITCHES`` switches of one contact at one instant stop the run (chatter).
+implies this, so the filter never misses one).  A contact that switches at ``s`` in the step
+changes the force on its two beads only, so the event is handled where it happens
+(:func:`local_events`): the beads of the flagged contacts whose quadratic has a root in the
+step form *event windows* (windows within two beads of each other joined), and each window is
+stepped again alone from the step's start: a pass over its beads to the earliest root ``te``
+of its contacts, where they switch (``D_hysteresis += V(delta(te))`` on opening, exact law,
+as the reference does), then the rest of the step in the new state (repeated for further
+events).  The beads next to a window (its neighbours) move on their parabolas meanwhile; at
+the end their accelerations and velocities are finished again with the window's end force,
+and their velocities get the window's impulse on the contact they share (so that the
+contact's impulses on its two beads are equal and opposite: momentum is kept).  A window
+whose edge contact switches inside the step, or is closed in the mean-force band, takes in
+that neighbour and is stepped again; one that reaches a window already stepped is joined with
+it, and the step's windows are stepped again (rare).  The damping power's trapezoid is the
+whole step's, with each window's own sub-steps in place of its share.  The cost is a few
+passes over a few beads per event, whatever the chain's length, and the windows are stepped
+in order along the chain after the (possibly threaded) pass: the result does not depend on
+the thread count.  A contact that sits on its switching point after a switch (DMT, Hertz:
+``delta_off = 0``) is switched back at once if it moves outward (the reference's settle
+rule); more than ``MAX_SWITCHES`` switches of one contact at one instant stop the run
+(chatter).
 
 ``locate = False``: plain step-quantized Verlet, as a fixed-step MD code: after each step a
 closed contact with ``delta <= delta_off`` opens and an open one with ``delta >= 0`` closes
@@ -59,7 +72,7 @@ A threaded variant (``Flags.threaded``) runs the segments on numba's threads
 (``prange``); since the cut depends on the chain alone, the result does not depend on the
 thread count, bitwise.  Against one segment (a chain of at most SEGMENT contacts is one),
 only the damping power is summed in another order: positions, velocities, states and events
-are bitwise the same, ``D_viscous`` agrees to round-off.  Event location, switching and
+are bitwise the same, ``D_viscous`` agrees to round-off.  Event windows, switching and
 settling stay serial (rare).
 
 **Records** (numba named tuples and one structured record, so that each function takes a
@@ -276,8 +289,7 @@ class Segments(NamedTuple):
     real: np.ndarray  # [count, 5] damping power; (F, Fv) of the first and of the last contact
     ints: np.ndarray  # [count, 4] int64 flagged contacts, step-quantized switches, status
     #                   (OK or OUT_OF_TABLE: the segment's last failure), its contact
-    flag: np.ndarray  # [count, FLAG_CAP] int64 the first flagged contacts (row 0 is
-    #                   KernelState.flagged: merge_segments appends the other rows' to it)
+    flag: np.ndarray  # [count, FLAG_CAP] int64 the first flagged contacts of each segment
     ev_real: np.ndarray  # [m, 2] switch k of segment s at row s * size + k: time, loss
     ev_contact: np.ndarray  # [m] int64 its contact
     kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
@@ -290,31 +302,35 @@ class KernelState(NamedTuple):
     closed: np.ndarray  # [m] bool: contact states
     counters: np.ndarray  # one record of dtype COUNTERS
     log: EventLog
-    flagged: np.ndarray  # [FLAG_CAP] contacts a pass flagged as possibly switching
     switching: np.ndarray  # [FLAG_CAP] contacts switching at the located event time
     chatter: np.ndarray  # [CHAT_CAP, 2] (contact, switches) at the current instant
     seg: Segments  # the pass's segments
+    local: Beads  # [2, n] the sub-steps of an event window (:func:`resolve_window`)
+    windows: np.ndarray  # [m, 2] int64 first and last bead of each event window of a step
+    saved: np.ndarray  # [2] COUNTERS: the counters before a step's windows, before one window
+    saved_chatter: np.ndarray  # [2, CHAT_CAP, 2] KernelState.chatter saved with them
 
 
 class FrameBlock(NamedTuple):
     """The states at the ends of consecutive frames, written by the loop (:func:`get_kernel`):
     row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P, W,
     P_ext)`` (the excitations' work and its rate),
-    ``counts[k]`` = ``(counters.events, counters.substeps)`` at that frame."""
+    ``counts[k]`` = ``(counters.events, counters.substeps, counters.windows,
+    counters.widened)`` at that frame."""
 
     x: np.ndarray  # [K, n]
     v: np.ndarray  # [K, n]
     a: np.ndarray  # [K, n]
     closed: np.ndarray  # [K, m] bool
     sums: np.ndarray  # [K, 5]
-    counts: np.ndarray  # [K, 2] int64
+    counts: np.ndarray  # [K, 4] int64
 
 
 def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
     """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
     return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
                       np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 5)),
-                      np.empty((frames, 2), dtype=np.int64))
+                      np.empty((frames, 4), dtype=np.int64))
 
 
 #: The kernel's counters and running sums (one record).
@@ -327,6 +343,8 @@ COUNTERS = np.dtype([
     ("flagged", np.int64),  # contacts the last pass flagged (may exceed FLAG_CAP)
     ("chatter_count", np.int64),  # rows of KernelState.chatter in use
     ("substeps", np.int64),  # event splits so far
+    ("windows", np.int64),  # event windows stepped so far (:func:`local_events`)
+    ("widened", np.int64),  # of which widened or joined with another while stepped
     ("d_viscous", np.float64),  # D_viscous
     ("d_hysteresis", np.float64),  # D_hysteresis
     ("power", np.float64),  # damping power at the current state
@@ -347,17 +365,21 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
                     np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64))
 
 
-def new_state(n_contacts: int, event_capacity: int, segment: int | None = None) -> KernelState:
-    """A zeroed :class:`KernelState` (no chatter instant yet), its pass cut into segments of
-    ``segment`` contacts (default :data:`SEGMENT`)."""
+def new_state(n: int, n_contacts: int, event_capacity: int,
+              segment: int | None = None) -> KernelState:
+    """A zeroed :class:`KernelState` of a chain of ``n`` beads and ``n_contacts`` contacts (no
+    chatter instant yet), its pass cut into segments of ``segment`` contacts (default
+    :data:`SEGMENT`)."""
     counters = np.zeros(1, dtype=COUNTERS)
     counters["chatter_time"] = -1.0
     log = EventLog(np.zeros(event_capacity), np.zeros(event_capacity, dtype=np.int64),
                    np.zeros(event_capacity, dtype=np.int8))
     seg = new_segments(n_contacts, segment)
-    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log, seg.flag[0],
+    local = Beads(np.zeros((2, n)), np.zeros((2, n)), np.zeros((2, n)))
+    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log,
                        np.zeros(FLAG_CAP, dtype=np.int64), np.zeros((CHAT_CAP, 2), dtype=np.int64),
-                       seg)
+                       seg, local, np.zeros((max(n_contacts, 1), 2), dtype=np.int64),
+                       np.zeros(2, dtype=COUNTERS), np.zeros((2, CHAT_CAP, 2), dtype=np.int64))
 
 
 # ---- geometry and the force of a closed contact -------------------------------------------
@@ -668,9 +690,10 @@ def predicted(old, b, h):
 
 
 @njit(cache=True)
-def contact_kick_force(flags, params, old, closed, h, j):
-    """Fv of contact j in the pass of length h from ``old`` (the force the beads' velocity
-    kick uses: :func:`segment_pass`'s ``fv``), its operations those of the pass."""
+def pass_force(flags, params, old, closed, h, j):
+    """``(F, Fv)`` of contact j at the end of the pass of length h from ``old`` (the force,
+    and the force the beads' velocity kick uses: :func:`segment_pass`'s ``f`` and ``fv``),
+    by the pass's operations."""
     walls = flags[WALLS]
     n = old.x.shape[0]
     rshift = 0 if walls else 1
@@ -681,27 +704,28 @@ def contact_kick_force(flags, params, old, closed, h, j):
     if rb < n:
         x_r, _, ve_r = predicted(old, rb, h)
     if not closed[j]:
-        return 0.0
+        return 0.0, 0.0
     d = x_l - x_r - params.gap
     r = ve_l - ve_r
-    fv = force_at(flags, params, j, d)[0]
+    f = force_at(flags, params, j, d)[0]
+    fv = f
     if in_kick_band(flags, params, j, d):
         d0 = across(walls, old.x, j) - params.gap
         fv = 2.0 * mean_force_at(flags, params, j, d0, d) - force_at(flags, params, j, d0)[0]
     if flags[DAMPED]:
+        f += params.damping * r
         fv += params.damping * r
-    return fv
+    return f, fv
 
 
 @njit(cache=True)
 def refinish(flags, params, old, vn, closed, h, now, b):
     """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces of its two
-    contacts (:func:`contact_kick_force`), by the pass's operations."""
+    contacts (:func:`pass_force`), by the pass's operations."""
     rshift = 0 if flags[WALLS] else 1
     jl, jr = b - rshift, b - rshift + 1
-    fv_l = contact_kick_force(flags, params, old, closed, h, jl) if jl >= 0 else 0.0
-    fv_r = (contact_kick_force(flags, params, old, closed, h, jr) if jr < closed.shape[0]
-            else 0.0)
+    fv_l = pass_force(flags, params, old, closed, h, jl)[1] if jl >= 0 else 0.0
+    fv_r = pass_force(flags, params, old, closed, h, jr)[1] if jr < closed.shape[0] else 0.0
     x, vh, ve = predicted(old, b, h)
     im, g = bead_factors(flags, params, b)
     av = bead_accelerations(0.0, fv_l - fv_r, x, ve, im, g, flags, params, now)[1]
@@ -713,7 +737,7 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, j0, j1, count, s,
                 fv_last):
     """The mean-force kicks of segment s's contacts ``kicked[j0: j0 + count]`` (in the band
     near snap-off), after its pass: the velocities of the beads next to them that the pass
-    finished, redone with each contact's ``Fv`` (:func:`contact_kick_force`) by the pass's
+    finished, redone with each contact's ``Fv`` (:func:`pass_force`) by the pass's
     operations, and the segment's first and last ``Fv``; returns those two.  Out of the
     pass's loop, whose registers a call inside it cost 20-30 % on a chain of unlike beads."""
     n = old.x.shape[0]
@@ -726,9 +750,9 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, j0, j1, count, s,
     for k in range(count):
         j = kicked[j0 + k]
         if j == j0:
-            fv_first = contact_kick_force(flags, params, old, closed, h, j)
+            fv_first = pass_force(flags, params, old, closed, h, j)[1]
         if j == j1 - 1:
-            fv_last = contact_kick_force(flags, params, old, closed, h, j)
+            fv_last = pass_force(flags, params, old, closed, h, j)[1]
         for b in (j + rshift - 1, j + rshift):
             if lo <= b <= hi:
                 refinish(flags, params, old, vn, closed, h, now, b)
@@ -897,22 +921,14 @@ def log_switches(ks, s):
         record_event(ks, j, seg.ev_real[k, 0], 1 if ks.closed[j] else 0)
 
 
-@njit(cache=True)
-def gather_flags(seg, s, total):
-    """Append segment s's flagged contacts to row 0 (KernelState.flagged), which holds
-    ``total`` of them."""
-    cap = seg.flag.shape[1]
-    for k in range(min(seg.ints[s, I_FLAGGED], cap - total)):
-        seg.flag[0, total + k] = seg.flag[s, k]
-
-
 @njit
 def merge_segments(flags, params, old, new, h, t1, ks):
     """After every segment of a pass (:func:`segment_pass`): finish the beads at their
     edges, then in segment order add up the damping power, log the step-quantized switches
-    (and their hysteresis losses), gather the flagged contacts into ``ks.flagged`` and
-    record failures, so that all of it is as one pass from left to right would have it
-    whatever thread ran which segment.  Returns the damping power at the step's end."""
+    (and their hysteresis losses), count the flagged contacts (each segment's stay in its
+    row of ``Segments.flag``, :func:`find_windows`) and record failures, so that all of it
+    is as one pass from left to right would have it whatever thread ran which segment.
+    Returns the damping power at the step's end."""
     seg = ks.seg
     ints, real = seg.ints, seg.real
     power = 0.0
@@ -920,8 +936,6 @@ def merge_segments(flags, params, old, new, h, t1, ks):
     for s in range(seg.count):
         if s > 0:
             power += finish_edge(at_run_time(flags), params, old, new, h, t1, seg, s)
-            if total < FLAG_CAP:
-                gather_flags(seg, s, total)
         power += real[s, R_POWER]
         if ints[s, I_SWITCHES] > 0:
             log_switches(ks, s)
@@ -965,6 +979,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         log_switches(ks, 0)
     if ints[I_STATUS] != OK:
         fail(ks.counters[0], ints[I_STATUS], ints[I_BAD])
+    seg.ints[0, I_FLAGGED] = ints[I_FLAGGED]
     ks.counters[0].flagged = ints[I_FLAGGED]
     if flags[PULSE]:
         push_pulsed_bead(flags, params, new, h, t0 + h)
@@ -1018,25 +1033,20 @@ def first_root(walls, params, j, old, x_new, closed, h):
 
 
 @njit(cache=True)
-def locate_events(walls, params, old, x_new, h, tol, ks):
-    """Earliest root te among the flagged contacts, and the contacts switching with it (into
+def locate_events(walls, params, old, x_new, h, tol, ks, jl, jr):
+    """Earliest root te among contacts jl .. jr, and the contacts switching with it (into
     ks.switching): returns (te, count), te = -1 if none."""
     counters = ks.counters[0]
-    closed, flagged, switching = ks.closed, ks.flagged, ks.switching
-    nf = counters.flagged
-    scan_all = nf > flagged.shape[0]
-    cnt = closed.shape[0] if scan_all else nf
+    closed, switching = ks.closed, ks.switching
     te = -1.0
-    for k in range(cnt):
-        j = k if scan_all else flagged[k]
+    for j in range(jl, jr + 1):
         s = first_root(walls, params, j, old, x_new, closed, h)
         if s >= 0.0 and (te < 0.0 or s < te):
             te = s
     if te < 0.0:
         return te, 0
     ns = 0
-    for k in range(cnt):
-        j = k if scan_all else flagged[k]
+    for j in range(jl, jr + 1):
         s = first_root(walls, params, j, old, x_new, closed, h)
         if s >= 0.0 and s <= te + tol:
             if ns >= switching.shape[0]:
@@ -1185,12 +1195,349 @@ def switch_all(flags, params, count, t, beads, ks):
     settle(flags, params, ks.switching, count, t, beads, ks)
 
 
+# ---- events where they happen: windows of beads sub-stepped alone (rare path) ---------------
+# A contact that switches at s in (0, h) changes the force on its two beads only.  The pass
+# steps the whole chain; then each event window (the beads of the contacts that switch in the
+# step, with their neighbours within one bead) is stepped again alone, split at its events,
+# while the beads next to it (its *neighbours*) move on their parabolas of the step.  Cost per
+# event: a few passes over a few beads, whatever the chain's length.
+@njit(inline="always")
+def window_contacts(walls, n, m, lo, hi):
+    """The contacts of the window of beads lo .. hi: (first, last, left edge, right edge), an
+    edge being the contact with a neighbour bead (-1 where the window reaches the chain's
+    end; a wall is not a neighbour: it does not move)."""
+    s = 0 if walls else 1  # contact left of bead b: b - s; right: b - s + 1
+    jl, jr = max(lo - s, 0), min(hi - s + 1, m - 1)
+    return jl, jr, jl if lo >= 1 else -1, jr if hi <= n - 2 else -1
+
+
+@njit(cache=True)
+def find_windows(walls, params, old, x_new, h, ks):
+    """The event windows of a pass from ``old`` (beads of the flagged contacts that have a
+    root in the step, :func:`first_root`; windows within two beads of each other joined)
+    into ``ks.windows``, in order along the chain; returns their count."""
+    seg, win, closed = ks.seg, ks.windows, ks.closed
+    n = old.x.shape[0]
+    count = 0
+    for s in range(seg.count):
+        nf = seg.ints[s, I_FLAGGED]
+        j0 = s * seg.size
+        listed = nf <= seg.flag.shape[1]  # else the segment's every contact
+        for k in range(nf if listed else min(j0 + seg.size, closed.shape[0]) - j0):
+            j = seg.flag[s, k] if listed else j0 + k
+            if first_root(walls, params, j, old, x_new, closed, h) < 0.0:
+                continue
+            left, right = beads_of(walls, j)
+            left, right = max(left, 0), min(right, n - 1)
+            if count > 0 and left <= win[count - 1, 1] + 2:
+                win[count - 1, 1] = max(win[count - 1, 1], right)
+            else:
+                win[count, 0], win[count, 1] = left, right
+                count += 1
+    return count
+
+
+@njit(cache=True)
+def window_power(flags, params, beads, closed, lo, hi, t):
+    """Damping power of window lo .. hi in state ``beads`` at time t: its contacts' (edges
+    included, rates from v) and its beads' substrate damping."""
+    walls = flags[WALLS]
+    jl, jr, _, _ = window_contacts(walls, beads.x.shape[0], closed.shape[0], lo, hi)
+    p = 0.0
+    if flags[DAMPED]:
+        for j in range(jl, jr + 1):
+            if closed[j]:
+                r = across(walls, beads.v, j)
+                p += params.damping * r * r
+    if flags[SUB_DAMPED]:
+        vb = drive_at(flags, params, t)[1]
+        for b in range(lo, hi + 1):
+            p += substrate_power(beads.v[b] - vb, bead_factors(flags, params, b)[1], flags,
+                                 params)
+    return p
+
+
+@njit(cache=True)
+def start_force(flags, params, beads, closed, j):
+    """Force of contact j in state ``beads`` (damping rate from v)."""
+    if j < 0 or not closed[j]:
+        return 0.0
+    f = force_at(flags, params, j, across(flags[WALLS], beads.x, j) - params.gap)[0]
+    if flags[DAMPED]:
+        f += params.damping * across(flags[WALLS], beads.v, j)
+    return f
+
+
+@njit(cache=True)
+def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
+    """Bead b of a window sub-step ending at t1: acceleration and end velocity from its net
+    contact forces (f, fv), as the pass; ``nxt`` holds its predicted x, v_half and (in
+    ``a``) v_est.  Returns its substrate damping power."""
+    im, g = bead_factors(flags, params, b)
+    x, vh, ve = nxt.x[b], nxt.v[b], nxt.a[b]
+    a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
+    nxt.a[b] = a
+    nxt.v[b] = vh + 0.5 * h * av
+    if flags[PULSE] and b == params.drive.bead:
+        da = drive_at(flags, params, t1)[2] * (params.mix.inv_mass[b] if flags[MIXED] else 1.0)
+        nxt.a[b] += da
+        nxt.v[b] += 0.5 * h * da
+    return substrate_power(ve - now[1], g, flags, params) if flags[SUB_DAMPED] else 0.0
+
+
+@njit(cache=True)
+def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi):
+    """One Verlet (sub)step of length h from ``cur`` into ``nxt`` of the window of beads
+    lo .. hi: its beads stepped as the pass steps them (mean-force kick near snap-off
+    included), its neighbours along their parabolas (acceleration unchanged).  Returns
+    (damping power of the window at the end, the forces of its left and right edge
+    contacts, which edge is closed in the mean-force band (1 left, 2 right, 3 both), status,
+    its contact)."""
+    walls = flags[WALLS]
+    n, m = cur.x.shape[0], closed.shape[0]
+    jl, jr, _, _ = window_contacts(walls, n, m, lo, hi)
+    now = drive_at(flags, params, t0 + h)
+    for b in range(max(lo - 1, 0), min(hi + 1, n - 1) + 1):
+        x, vh, ve = predicted(cur, b, h)
+        nxt.x[b], nxt.v[b], nxt.a[b] = x, vh, ve  # a: v_est until the bead is finished
+    power, f_edge_l, f_edge_r, band, status, bad = 0.0, 0.0, 0.0, 0, OK, 0
+    f_l, fv_l = 0.0, 0.0  # force of the contact left of the bead to finish next
+    for j in range(jl, jr + 1):
+        left, right = beads_of(walls, j)
+        x_l, ve_l = (nxt.x[left], nxt.a[left]) if left >= 0 else (0.0, 0.0)
+        x_r, ve_r = (nxt.x[right], nxt.a[right]) if right < n else (0.0, 0.0)
+        d = x_l - x_r - params.gap
+        r = ve_l - ve_r
+        edge = 1 if 0 <= left < lo else (2 if hi < right < n else 0)
+        f, fv = 0.0, 0.0
+        if closed[j]:
+            f, ok = force_at(flags, params, j, d)
+            if not ok:
+                status, bad = OUT_OF_TABLE, j
+            fv = f
+            if in_kick_band(flags, params, j, d):
+                if edge:
+                    band |= edge
+                else:
+                    d0 = across(walls, cur.x, j) - params.gap
+                    fv = (2.0 * mean_force_at(flags, params, j, d0, d)
+                          - force_at(flags, params, j, d0)[0])
+            if flags[DAMPED]:
+                f += params.damping * r
+                fv += params.damping * r
+                power += params.damping * r * r
+        if edge == 1:
+            f_edge_l = f
+        elif edge == 2:
+            f_edge_r = f
+        if lo <= left <= hi:
+            power += finish_bead(flags, params, nxt, left, f_l - f, fv_l - fv, h, t0 + h, now)
+        f_l, fv_l = f, fv
+    if not walls and hi == n - 1:  # the last bead: no contact right
+        power += finish_bead(flags, params, nxt, hi, f_l, fv_l, h, t0 + h, now)
+    for b in (lo - 1, hi + 1):  # the neighbours: on their parabolas
+        if 0 <= b < n:
+            nxt.v[b] = nxt.a[b]
+            nxt.a[b] = cur.a[b]
+    return power, f_edge_l, f_edge_r, band, status, bad
+
+
+@njit(cache=True)
+def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse, window_left):
+    """Neighbour bead b of a window after the step of length h ending at t1: its end
+    acceleration and velocity from the window's end force ``f_edge`` on the contact they
+    share and the pass's force on its other contact, its velocity given the difference
+    ``impulse`` between the window's impulse on that contact (sum over the sub-steps) and the
+    step's trapezoid, so that the contact's impulses on its two beads are equal and opposite
+    (momentum is kept).  ``window_left``: the window is on b's left."""
+    s = 0 if flags[WALLS] else 1
+    x, vh, ve = predicted(old, b, h)
+    now = drive_at(flags, params, t1)
+    im, g = bead_factors(flags, params, b)
+    if window_left:  # the edge is b's left contact: +F on b
+        jo = b - s + 1
+        fo, fvo = pass_force(flags, params, old, closed, h, jo) if jo < closed.shape[0] else (
+            0.0, 0.0)
+        f, fv, dj = f_edge - fo, f_edge - fvo, impulse
+    else:  # the edge is b's right contact: -F on b
+        jo = b - s
+        fo, fvo = pass_force(flags, params, old, closed, h, jo) if jo >= 0 else (0.0, 0.0)
+        f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
+    a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
+    new.x[b] = x
+    new.a[b] = a
+    new.v[b] = vh + 0.5 * h * av + dj * im
+    if flags[PULSE] and b == params.drive.bead:
+        da = drive_at(flags, params, t1)[2] * im
+        new.a[b] += da
+        new.v[b] += 0.5 * h * da
+
+
+@njit(cache=True)
+def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
+    """Step the window of beads lo .. hi from ``old`` (time t0) through its events to t0 +
+    dt, as the whole chain was once stepped (:func:`window_pass` to the earliest root te of
+    its contacts, the contacts switch there, the rest of the step in the new state, repeated),
+    into ``new``, and finish its neighbours (:func:`finish_neighbour`).
+
+    Returns ``(grow, viscous, power)``: ``grow`` is nonzero (1 left, 2 right, 3 both, nothing
+    written) when an edge contact switches in the step or is closed in the mean-force band:
+    the window must take in that neighbour.  Else ``viscous`` is what the window's sub-steps
+    add to the step's trapezoid of the damping power, ``power`` what they add to its end."""
+    counters = ks.counters[0]
+    walls = flags[WALLS]
+    n, m = old.x.shape[0], ks.closed.shape[0]
+    jl, jr, edge_l, edge_r = window_contacts(walls, n, m, lo, hi)
+    copies = (buffer(ks.local, 0), buffer(ks.local, 1))
+    for b in range(max(lo - 1, 0), min(hi + 1, n - 1) + 1):
+        copies[0].x[b], copies[0].v[b], copies[0].a[b] = old.x[b], old.v[b], old.a[b]
+    p_state = p_start = window_power(flags, params, old, ks.closed, lo, hi, t0)
+    f0_l = start_force(flags, params, old, ks.closed, edge_l)
+    f0_r = start_force(flags, params, old, ks.closed, edge_r)
+    fs_l, fs_r, j_l, j_r = f0_l, f0_r, 0.0, 0.0  # edge forces at the state, impulses so far
+    tol = SIMULTANEOUS * (1.0 + abs(t0))
+    c, done, h, redo, nsub, viscous, p_pass, first = 0, 0.0, dt, 0, 0, 0.0, 0.0, True
+    while True:
+        cur, nxt = copies[c], copies[1 - c]
+        p1, f_l, f_r, band, status, bad = window_pass(flags, params, cur, nxt, ks.closed, h,
+                                                      t0 + done, lo, hi)
+        if first:
+            p_pass, first = p1, False  # the window's share of the whole pass's power
+        if status != OK:
+            fail(counters, status, bad)
+            counters.bad_time = t0 + done + h
+            return 0, 0.0, 0.0
+        if band:
+            return band, 0.0, 0.0
+        ns, te, last = redo, h, False
+        if redo == 0:
+            te, ns = locate_events(walls, params, cur, nxt.x, h, tol, ks, jl, jr)
+            if counters.status != OK:
+                counters.bad_time = t0 + done
+                return 0, 0.0, 0.0
+            last = ns == 0 or te >= h - tol
+        grow = 0
+        for k in range(ns):
+            grow |= (1 if ks.switching[k] == edge_l else 0) | (2 if ks.switching[k] == edge_r
+                                                                 else 0)
+        if grow:
+            return grow, 0.0, 0.0
+        if last or redo > 0:  # keep this sub-step
+            viscous += 0.5 * h * (p_state + p1)
+            j_l += 0.5 * h * (fs_l + f_l)
+            j_r += 0.5 * h * (fs_r + f_r)
+            p_state, fs_l, fs_r, c = p1, f_l, f_r, 1 - c
+        if ns == 0:
+            break
+        if redo == 0 and not last and te > 0.0:
+            redo, h = ns, te  # step again, up to the event
+            continue
+        tev = t0 + dt if last else t0 + done + te
+        before = counters.power
+        switch_all(flags, params, ns, tev, copies[c], ks)
+        p_state += counters.power - before
+        counters.substeps += 1
+        nsub += 1
+        if nsub > MAX_SUBSTEPS:
+            fail(counters, TOO_MANY_SUBSTEPS, ks.switching[0])
+        if counters.status != OK:
+            counters.bad_time = tev
+            return 0, 0.0, 0.0
+        if last:
+            break
+        done += te
+        h = dt - done
+        redo = 0
+    out = copies[c]
+    for b in range(lo, hi + 1):
+        new.x[b], new.v[b], new.a[b] = out.x[b], out.v[b], out.a[b]
+    t1 = t0 + dt
+    if edge_l >= 0:
+        finish_neighbour(flags, params, old, new, ks.closed, dt, t1, lo - 1, fs_l,
+                         j_l - 0.5 * dt * (f0_l + fs_l), False)
+    if edge_r >= 0:
+        finish_neighbour(flags, params, old, new, ks.closed, dt, t1, hi + 1, fs_r,
+                         j_r - 0.5 * dt * (f0_r + fs_r), True)
+    return 0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass
+
+
+@njit(cache=True)
+def save_counters(ks, k):
+    """Save what stepping a window changes besides the beads (slot k of ``ks.saved``)."""
+    c, s = ks.counters[0], ks.saved[k]
+    s.events, s.d_hysteresis, s.power, s.substeps = c.events, c.d_hysteresis, c.power, c.substeps
+    s.chatter_time, s.chatter_count = c.chatter_time, c.chatter_count
+    ks.saved_chatter[k, :, :] = ks.chatter
+
+
+@njit(cache=True)
+def restore_counters(ks, k):
+    """Undo every window stepped since :func:`save_counters` (k): the contacts switched since
+    (each switch is one event in the log) back, the counters and the chatter guard."""
+    c, s = ks.counters[0], ks.saved[k]
+    for e in range(c.events - 1, s.events - 1, -1):
+        j = ks.log.contact[e]
+        ks.closed[j] = not ks.closed[j]
+    c.events, c.d_hysteresis, c.power, c.substeps = s.events, s.d_hysteresis, s.power, s.substeps
+    c.chatter_time, c.chatter_count = s.chatter_time, s.chatter_count
+    ks.chatter[:, :] = ks.saved_chatter[k]
+
+
+@njit(cache=True)
+def widen(win, k, count, grow):
+    """Window k widened by a bead on the side(s) ``grow`` asks, joined with the windows after
+    it that it comes within two beads of; returns the new count."""
+    if grow & 1:
+        win[k, 0] -= 1
+    if grow & 2:
+        win[k, 1] += 1
+    while k + 1 < count and win[k + 1, 0] <= win[k, 1] + 2:
+        win[k, 1] = max(win[k, 1], win[k + 1, 1])
+        win[k + 1:count - 1] = win[k + 2:count].copy()
+        count -= 1
+    return count
+
+
+@njit(cache=True)
+def local_events(flags, params, old, new, t0, dt, ks):
+    """The events of the step from ``old`` (t0) whose pass is in ``new``, each window of them
+    stepped alone (:func:`find_windows`, :func:`resolve_window`) in order along the chain.  A
+    window that must take in a neighbour is undone, widened and stepped again; one that comes
+    within two beads of the window before it is joined with it, and the step's windows are
+    all stepped again (rare).  Returns what the windows add to the step's trapezoid of the
+    damping power and to its end power."""
+    win = ks.windows
+    count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
+    save_counters(ks, 0)
+    viscous, power, k = 0.0, 0.0, 0
+    while k < count:
+        save_counters(ks, 1)
+        grow, dv, dp = resolve_window(flags, params, old, new, ks, win[k, 0], win[k, 1], t0, dt)
+        if ks.counters[0].status != OK:
+            return 0.0, 0.0
+        if grow == 0:
+            viscous += dv
+            power += dp
+            k += 1
+            continue
+        restore_counters(ks, 1)
+        ks.counters[0].widened += 1
+        count = widen(win, k, count, grow)
+        if k > 0 and win[k, 0] <= win[k - 1, 1] + 2:  # reaches a window already stepped
+            win[k - 1, 1] = win[k, 1]
+            win[k:count - 1] = win[k + 1:count].copy()
+            count = widen(win, k - 1, count - 1, 0)
+            restore_counters(ks, 0)
+            viscous, power, k = 0.0, 0.0, 0
+    ks.counters[0].windows += count
+    return viscous, power
+
+
 @njit(inline="always")
 def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
-    """Up to nsteps steps of dt from buffers[counters.current]; each step is split at the
-    events located inside it (the pass is redone to the earliest event time te, the
-    contacts switch, the rest of the step follows in the new state).  Stops early on an
-    error or when the event log is half full (counters.status).
+    """Up to nsteps steps of dt from buffers[counters.current]: a pass over the chain, then
+    the windows of the events located inside the step stepped alone (:func:`local_events`).
+    Stops early on an error or when the event log is half full (counters.status).
 
     (One function: with the step in a function of its own, inlined, the loop ran 30 % slower
     on a 20-bead chain.)"""
@@ -1201,59 +1548,26 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
             counters.status = EVENTS_FULL
             return
         t0 = counters.step * dt
-        tol = SIMULTANEOUS * (1.0 + abs(t0))
-        done = 0.0  # part of the step integrated so far
-        h = dt
-        redo = 0  # > 0: this pass is the step up to `redo` simultaneous events
-        nsub = 0
-        while True:
-            o = counters.current
-            w = 1 - o
-            old, new = copies[o], copies[w]
-            counters.flagged = 0
-            p1 = verlet_pass(flags, params, old, new, h, t0 + done, ks, run_segments)
+        o = counters.current
+        old, new = copies[o], copies[1 - o]
+        counters.flagged = 0
+        p1 = verlet_pass(flags, params, old, new, dt, t0, ks, run_segments)
+        if counters.status != OK:
+            counters.bad_time = t0 + dt
+            return
+        p0 = counters.power
+        viscous, power = 0.0, 0.0
+        if flags[LOCATE] and counters.flagged > 0:
+            viscous, power = local_events(at_run_time(flags), params, old, new, t0, dt, ks)
             if counters.status != OK:
-                counters.bad_time = t0 + done + h
                 return
-            ns = 0
-            te = -1.0
-            last = False  # the pass reaches the end of the step
-            if redo > 0:  # this pass ends on the events
-                ns, te = redo, h
-            else:
-                if flags[LOCATE] and counters.flagged > 0:
-                    te, ns = locate_events(bool(flags[WALLS]), params, old, new.x, h, tol, ks)
-                    if counters.status != OK:
-                        counters.bad_time = t0 + done
-                        return
-                last = ns == 0 or te >= h - tol
-            if last or redo > 0:  # keep this pass
-                counters.d_viscous += 0.5 * h * (counters.power + p1)
-                counters.power = p1
-                counters.current = w
-                if flags[PULSE] or flags[BASE]:  # the excitations' work, by the same rule
-                    pe = external_power(at_run_time(flags), params, new, t0 + done + h)
-                    counters.work += 0.5 * h * (counters.ext_power + pe)
-                    counters.ext_power = pe
-            if ns == 0:
-                break
-            if redo == 0 and not last and te > 0.0:
-                redo, h = ns, te  # step again, up to the event
-                continue
-            tev = t0 + dt if last else t0 + done + te
-            switch_all(at_run_time(flags), params, ns, tev, copies[counters.current], ks)
-            counters.substeps += 1
-            nsub += 1
-            if nsub > MAX_SUBSTEPS:
-                fail(counters, TOO_MANY_SUBSTEPS, ks.switching[0])
-            if counters.status != OK:
-                counters.bad_time = tev
-                return
-            if last:
-                break
-            done += te
-            h = dt - done
-            redo = 0
+        counters.d_viscous += 0.5 * dt * (p0 + p1) + viscous
+        counters.power = p1 + power
+        counters.current = 1 - o
+        if flags[PULSE] or flags[BASE]:  # the excitations' work, by the same rule
+            pe = external_power(at_run_time(flags), params, new, t0 + dt)
+            counters.work += 0.5 * dt * (counters.ext_power + pe)
+            counters.ext_power = pe
         counters.step += 1
 
 
@@ -1284,6 +1598,8 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         block.sums[k, 4] = counters.ext_power
         block.counts[k, 0] = counters.events
         block.counts[k, 1] = counters.substeps
+        block.counts[k, 2] = counters.windows
+        block.counts[k, 3] = counters.widened
     return nframes
 
 
@@ -1309,7 +1625,8 @@ def named_params(p):
 @njit(inline="always")
 def named_state(k):
     """:class:`KernelState` from ``plain(ks)``."""
-    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], k[5], Segments(*k[6]))
+    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], Segments(*k[5]), Beads(*k[6]),
+                       k[7], k[8], k[9])
 
 
 _KERNELS: dict = {}

@@ -1,0 +1,212 @@
+"""Cost of contact events in long chains: ns per bead-step of a quiet and of an active chain.
+
+    python benchmarks/active_chains.py                        # the matrix below
+    python benchmarks/active_chains.py --sizes 1e3,1e4 --backends fast-1 --repeats 2
+
+Each point is micro-star's physics with ``chain.n = N`` and ``thermal.temperature = T``
+(``thermal.seed = 1``): at T = 0 the chain is struck at bead 1 and has one event in the run;
+at T = 2 every bead starts with a thermal velocity and contacts snap shut and apart all along
+the chain (about 0.08 events per bead per time unit).  A point runs in a process of its own
+(``mpiexec -n 2`` for two ranks): set-up and one warm-up block of steps are not timed, then
+``--repeats`` blocks of the same number of steps are, each on its own.  Reported per point:
+the median ns per bead-step of the stepping (wall time of the compiled loop for ``fast``, of
+LAMMPS's ``run`` for ``native``) with its min and max, the process's CPU ns per bead-step
+over the timed blocks (all threads of the process; rank 0's for ``native``), the events in
+the timed blocks, and the event windows stepped (``fast``).  ``os.getloadavg()`` before and
+after each point says whether the two cores were idle.
+
+Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
+``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
+Targets: the active chain within 1.3x the quiet one at every N; two ranks at least 1.8x one
+rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "results" / "active_chains.json"
+DT = 0.0025
+BACKENDS = ("fast-1", "fast-2", "native-1", "native-2")
+
+
+def steps_for(n: int, bead_steps: float) -> int:
+    """Steps per timed block: about ``bead_steps`` bead-steps, 40 to 20000 steps."""
+    return int(np.clip(bead_steps // n, 40, 20000))
+
+
+def scene_for(n: int, temperature: float, steps: int, blocks: int):
+    from mdgran.scene import load_scene
+
+    return load_scene("micro-star", [
+        ("chain.n", n), ("run.dt", DT), ("run.output_interval", steps * DT),
+        ("run.duration", blocks * steps * DT), ("thermal.temperature", temperature),
+        ("thermal.seed", 1), ("output.bead_stride", 0)])
+
+
+# ---- one point, in its own process ---------------------------------------------------------
+def fast_worker(n, temperature, threads, steps, repeats):
+    """The fast backend: each frame is one block of ``steps`` steps."""
+    from mdgran.backends.fast import FastBackend
+
+    b = FastBackend(scene_for(n, temperature, steps, repeats + 1), threads=threads)
+    frames = b.blocks()
+    next(frames)  # t = 0
+    next(frames)  # warm-up block
+    walls, cpus, events0, win0 = [], [], b.stats["events"], b.stats["event_windows"]
+    for _ in range(repeats):
+        k0, c0 = b.stats["kernel_s"], time.process_time()
+        next(frames)
+        walls.append(b.stats["kernel_s"] - k0)
+        cpus.append(time.process_time() - c0)
+    return {"wall_s": walls, "cpu_s": cpus, "events": b.stats["events"] - events0,
+            "event_windows": b.stats["event_windows"] - win0,
+            "threads": b.stats["threads"], "rss_MB": _rss()}
+
+
+def native_worker(n, temperature, steps, repeats):
+    """``fix mdgran/chain`` with located events: LAMMPS's ``run`` of ``steps`` steps."""
+    from mdgran.backends.lammps import LammpsBackend
+
+    b = LammpsBackend(scene_for(n, temperature, steps, repeats + 1), contact="native",
+                      events="located")
+    b._start()
+    lmp = b.lmp
+    try:
+        lmp.command("run 0 post no")
+        lmp.command(f"run {steps} pre no post no")  # warm-up
+        walls, cpus = [], []
+        for _ in range(repeats):
+            t0, c0 = time.perf_counter(), time.process_time()
+            lmp.command(f"run {steps} pre no post no")
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+        if getattr(b, "_error", None) is not None:
+            raise b._error
+        return {"wall_s": walls, "cpu_s": cpus, "rank": lmp.extract_setting("world_rank"),
+                "rss_MB": _rss()}
+    finally:
+        lmp.close()
+
+
+def _rss():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def worker(args):
+    n, temperature, steps = args.worker, args.temperature, args.steps
+    if args.backend.startswith("fast"):
+        report = fast_worker(n, temperature, int(args.backend[-1]), steps, args.repeats)
+        report["rank"] = 0
+    else:
+        report = native_worker(n, temperature, steps, args.repeats)
+    Path(args.report_dir, f"rank-{report['rank']}.json").write_text(json.dumps(report))
+
+
+# ---- the driver -----------------------------------------------------------------------------
+def measure(n, temperature, backend, repeats, bead_steps, timeout):
+    steps = steps_for(n, bead_steps)
+    ranks = 2 if backend == "native-2" else 1
+    row = {"n": n, "temperature": temperature, "backend": backend, "steps_per_block": steps,
+           "repeats": repeats, "loadavg_before": os.getloadavg()}
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, __file__, "--worker", str(n), "--temperature", str(temperature),
+               "--backend", backend, "--steps", str(steps), "--repeats", str(repeats),
+               "--report-dir", tmp]
+        if ranks > 1:
+            cmd = [mpiexec, "-n", str(ranks)] + cmd
+        try:
+            res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout,
+                                 start_new_session=True)
+        except subprocess.TimeoutExpired:
+            return {**row, "error": f"not finished in {timeout} s"}
+        reports = sorted((json.loads(p.read_text()) for p in Path(tmp).glob("rank-*.json")),
+                         key=lambda r: r["rank"])
+    row["loadavg_after"] = os.getloadavg()
+    if res.returncode or len(reports) != ranks:
+        return {**row, "error": (res.stderr or res.stdout)[-600:]}
+    r0 = reports[0]
+    ns = 1e9 * np.array(r0["wall_s"]) / (n * steps)
+    cpu = 1e9 * sum(r0["cpu_s"]) / (n * steps * repeats)
+    row.update({"ns_per_bead_step_median": float(np.median(ns)),
+                "ns_per_bead_step_min": float(ns.min()),
+                "ns_per_bead_step_max": float(ns.max()),
+                "cpu_ns_per_bead_step": float(cpu),
+                "peak_rss_MB_per_rank": [r["rss_MB"] for r in reports]})
+    for key in ("events", "event_windows", "threads"):
+        if key in r0:
+            row[key] = r0[key]
+    return row
+
+
+def ratios(rows):
+    """Active / quiet per (backend, N), and 2 / 1 (threads or ranks) per (N, T), from the
+    medians (their spreads beside them)."""
+    done = {(r["backend"], r["n"], r["temperature"]): r for r in rows if "error" not in r}
+    out = []
+    for (backend, n, t), r in sorted(done.items()):
+        if t == 0:
+            continue
+        quiet = done.get((backend, n, 0.0))
+        if quiet is not None:
+            out.append({"backend": backend, "n": n, "active_over_quiet":
+                        r["ns_per_bead_step_median"] / quiet["ns_per_bead_step_median"]})
+        if backend.endswith("-2"):
+            one = done.get((backend[:-1] + "1", n, t))
+            if one is not None:
+                out.append({"backend": backend[:-2], "n": n, "temperature": t,
+                            "two_over_one_speed": one["ns_per_bead_step_median"]
+                            / r["ns_per_bead_step_median"]})
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1e3,1e4,1e5,1e6")
+    ap.add_argument("--temperatures", type=float, nargs="+", default=[0.0, 2.0])
+    ap.add_argument("--backends", nargs="+", default=list(BACKENDS), choices=BACKENDS)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--bead-steps", type=float, default=4e8,
+                    help="bead-steps per timed block (steps = this / N, 40 to 20000)")
+    ap.add_argument("--timeout", type=float, default=900.0, help="seconds per point")
+    ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--temperature", type=float, default=0.0, help=argparse.SUPPRESS)
+    ap.add_argument("--backend", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--steps", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--report-dir", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker is not None:
+        return worker(args)
+    rows = []
+    for n in (int(float(s)) for s in args.sizes.split(",")):
+        for backend in args.backends:
+            for t in args.temperatures:
+                row = measure(n, t, backend, args.repeats, args.bead_steps, args.timeout)
+                rows.append(row)
+                print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
+                      flush=True)
+    result = {"benchmark": __doc__.splitlines()[0], "dt": DT,
+              "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+              "rows": rows, "ratios": ratios(rows)}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
