@@ -110,6 +110,58 @@ def test_momentum_is_kept_through_events(n, seed, gap, segment):
     assert np.max(np.abs(p - p[0])) <= 1e-13 * n * scale, (res.stats["events"], p - p[0])
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_beads_at_rest_are_skipped_exactly(threads):
+    """micro-star struck at bead 1, chains of 2,000 and 100,000 beads to t = 20: the pulse
+    never reaches bead 2,000 (38 beads move), so the two chains' beads 1-2,000 have the same
+    motion, bit for bit; the long chain steps only the segments its activity front covers
+    (its 2,000-bead twin is one segment, stepped whole every step)."""
+    over = [("run.duration", 20.0), ("run.output_interval", 1.0)]
+    short = run(load_scene("micro-star", over + [("chain.n", 2000)]), "fast", threads=1)
+    long = run(load_scene("micro-star", over + [("chain.n", 100_000)]), "fast",
+               threads=threads)
+    a, b = short.trajectory, long.trajectory
+    assert not (a.v[:, 1500:] != 0).any() and (a.v[:, 30] != 0).any()
+    for name in ("x", "v"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)[:, :2000]), name
+        assert not getattr(b, name)[:, 2000:].any(), name
+    assert np.array_equal(a.closed, b.closed[:, :2001])
+    for name in ("ev_time", "ev_contact", "ev_kind"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert short.stats["bead_steps"] == 2000 * short.stats["steps"]
+    assert long.stats["bead_steps"] < 0.03 * 100_000 * long.stats["steps"]
+
+
+@settings(max_examples=15, deadline=None)
+@given(n=st.integers(8, 60), segment=st.integers(2, 9), free=st.booleans(),
+       gap=st.sampled_from([0.0, 0.002]), start=st.sampled_from([0.0, 1.5]),
+       bead=st.integers(1, 60), mixed=st.booleans())
+def test_a_pulse_anywhere_is_stepped_as_the_whole_chain(n, segment, free, gap, start, bead,
+                                                        mixed):
+    """A force pulse on any bead of a chain at rest (from t = 0 or later), fixed or free,
+    with or without a gap, of like or unlike beads, its pass cut into segments of 2-9
+    contacts so that the activity front skips the segments at rest: positions, velocities,
+    contact states and events bitwise those of the uncut pass, which steps every bead."""
+    sections = dict(chain={"n": n, "boundary": "free" if free else "fixed",
+                           "initial_gap": gap},
+                    impulse={"velocity": 0.0},
+                    pulse={"amplitude": 3.0, "duration": 0.5, "start": start,
+                           "bead": min(bead, n)},
+                    run={"duration": 8.0, "output_interval": 0.5, "dt": 0.005})
+    if mixed:
+        sections["beads"] = {"density": [1.0 + (i % 2) for i in range(n)]}
+    scene = make_scene(**sections)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(fk, "SEGMENT", segment)
+        cut = run(scene, "fast", threads=1)
+        mp.setattr(fk, "SEGMENT", 1 << 30)
+        whole = run(scene, "fast", threads=1)
+    assert cut.status == whole.status == "complete"
+    for name in ("x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
+        assert np.array_equal(getattr(cut.trajectory, name), getattr(whole.trajectory, name))
+    assert cut.stats["bead_steps"] <= whole.stats["bead_steps"]
+
+
 def test_ledger_closure_scales_like_dt_squared():
     over = [("run.duration", 60.0)]
     dts = [0.005, 0.0025, 0.00125]

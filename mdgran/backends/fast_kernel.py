@@ -316,21 +316,21 @@ class FrameBlock(NamedTuple):
     row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P, W,
     P_ext)`` (the excitations' work and its rate),
     ``counts[k]`` = ``(counters.events, counters.substeps, counters.windows,
-    counters.widened)`` at that frame."""
+    counters.widened, counters.bead_steps)`` at that frame."""
 
     x: np.ndarray  # [K, n]
     v: np.ndarray  # [K, n]
     a: np.ndarray  # [K, n]
     closed: np.ndarray  # [K, m] bool
     sums: np.ndarray  # [K, 5]
-    counts: np.ndarray  # [K, 4] int64
+    counts: np.ndarray  # [K, 5] int64
 
 
 def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
     """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
     return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
                       np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 5)),
-                      np.empty((frames, 4), dtype=np.int64))
+                      np.empty((frames, 5), dtype=np.int64))
 
 
 #: The kernel's counters and running sums (one record).
@@ -345,6 +345,11 @@ COUNTERS = np.dtype([
     ("substeps", np.int64),  # event splits so far
     ("windows", np.int64),  # event windows stepped so far (:func:`local_events`)
     ("widened", np.int64),  # of which widened or joined with another while stepped
+    ("front_lo", np.int64),  # first bead of the activity front (-1: not known yet, step all)
+    ("front_hi", np.int64),  # its last bead (front_lo > front_hi: every bead at rest)
+    ("seg_first", np.int64),  # the segments the step's pass runs (:func:`step_range`)
+    ("seg_last", np.int64),
+    ("bead_steps", np.int64),  # beads stepped so far (passes over the segments run)
     ("d_viscous", np.float64),  # D_viscous
     ("d_hysteresis", np.float64),  # D_hysteresis
     ("power", np.float64),  # damping power at the current state
@@ -372,6 +377,7 @@ def new_state(n: int, n_contacts: int, event_capacity: int,
     :data:`SEGMENT`)."""
     counters = np.zeros(1, dtype=COUNTERS)
     counters["chatter_time"] = -1.0
+    counters["front_lo"] = -1
     log = EventLog(np.zeros(event_capacity), np.zeros(event_capacity, dtype=np.int64),
                    np.zeros(event_capacity, dtype=np.int8))
     seg = new_segments(n_contacts, segment)
@@ -605,16 +611,16 @@ def drive_at(flags, params, t):
 
 
 @njit(cache=True)
-def external_power(flags, params, beads, t):
-    """Rate of the excitations' work at time t in state ``beads``: ``F(t) v_b + u_b'(t)
-    sum_i F_sub,i`` (:mod:`mdgran.drive`)."""
+def external_power(flags, params, beads, t, lo, hi):
+    """Rate of the excitations' work on beads lo .. hi at time t in state ``beads``: ``F(t)
+    v_b + u_b'(t) sum_i F_sub,i`` (:mod:`mdgran.drive`)."""
     ub, vb, fp = drive_at(flags, params, t)
     p = 0.0
-    if flags[PULSE]:
+    if flags[PULSE] and lo <= params.drive.bead <= hi:
         p += fp * beads.v[params.drive.bead]
     if flags[BASE]:
         total = 0.0
-        for i in range(beads.x.shape[0]):
+        for i in range(lo, hi + 1):
             y = beads.x[i] - ub
             f = -(params.k1 * y + params.k3 * y * y * y
                   + params.sub_damping * (beads.v[i] - vb))
@@ -933,8 +939,9 @@ def merge_segments(flags, params, old, new, h, t1, ks):
     ints, real = seg.ints, seg.real
     power = 0.0
     total = 0
-    for s in range(seg.count):
-        if s > 0:
+    first = ks.counters[0].seg_first
+    for s in range(first, ks.counters[0].seg_last + 1):
+        if s > first:
             power += finish_edge(at_run_time(flags), params, old, new, h, t1, seg, s)
         power += real[s, R_POWER]
         if ints[s, I_SWITCHES] > 0:
@@ -1219,7 +1226,7 @@ def find_windows(walls, params, old, x_new, h, ks):
     seg, win, closed = ks.seg, ks.windows, ks.closed
     n = old.x.shape[0]
     count = 0
-    for s in range(seg.count):
+    for s in range(ks.counters[0].seg_first, ks.counters[0].seg_last + 1):
         nf = seg.ints[s, I_FLAGGED]
         j0 = s * seg.size
         listed = nf <= seg.flag.shape[1]  # else the segment's every contact
@@ -1380,10 +1387,11 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     its contacts, the contacts switch there, the rest of the step in the new state, repeated),
     into ``new``, and finish its neighbours (:func:`finish_neighbour`).
 
-    Returns ``(grow, viscous, power)``: ``grow`` is nonzero (1 left, 2 right, 3 both, nothing
-    written) when an edge contact switches in the step or is closed in the mean-force band:
-    the window must take in that neighbour.  Else ``viscous`` is what the window's sub-steps
-    add to the step's trapezoid of the damping power, ``power`` what they add to its end."""
+    Returns ``(grow, viscous, power, work)``: ``grow`` is nonzero (1 left, 2 right, 3 both,
+    nothing written) when an edge contact switches in the step or is closed in the mean-force
+    band: the window must take in that neighbour.  Else ``viscous`` and ``work`` are what the
+    window's sub-steps add to the step's trapezoids of the damping power and of the
+    excitations' power (:func:`external_power`), ``power`` what they add to its end."""
     counters = ks.counters[0]
     walls = flags[WALLS]
     n, m = old.x.shape[0], ks.closed.shape[0]
@@ -1392,6 +1400,9 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     for b in range(max(lo - 1, 0), min(hi + 1, n - 1) + 1):
         copies[0].x[b], copies[0].v[b], copies[0].a[b] = old.x[b], old.v[b], old.a[b]
     p_state = p_start = window_power(flags, params, old, ks.closed, lo, hi, t0)
+    driven = flags[PULSE] or flags[BASE]
+    e_state = e_start = external_power(flags, params, old, t0, lo, hi) if driven else 0.0
+    work = 0.0
     f0_l = start_force(flags, params, old, ks.closed, edge_l)
     f0_r = start_force(flags, params, old, ks.closed, edge_r)
     fs_l, fs_r, j_l, j_r = f0_l, f0_r, 0.0, 0.0  # edge forces at the state, impulses so far
@@ -1406,24 +1417,28 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
         if status != OK:
             fail(counters, status, bad)
             counters.bad_time = t0 + done + h
-            return 0, 0.0, 0.0
+            return 0, 0.0, 0.0, 0.0
         if band:
-            return band, 0.0, 0.0
+            return band, 0.0, 0.0, 0.0
         ns, te, last = redo, h, False
         if redo == 0:
             te, ns = locate_events(walls, params, cur, nxt.x, h, tol, ks, jl, jr)
             if counters.status != OK:
                 counters.bad_time = t0 + done
-                return 0, 0.0, 0.0
+                return 0, 0.0, 0.0, 0.0
             last = ns == 0 or te >= h - tol
         grow = 0
         for k in range(ns):
             grow |= (1 if ks.switching[k] == edge_l else 0) | (2 if ks.switching[k] == edge_r
                                                                  else 0)
         if grow:
-            return grow, 0.0, 0.0
+            return grow, 0.0, 0.0, 0.0
         if last or redo > 0:  # keep this sub-step
             viscous += 0.5 * h * (p_state + p1)
+            if driven:
+                e1 = external_power(flags, params, nxt, t0 + done + h, lo, hi)
+                work += 0.5 * h * (e_state + e1)
+                e_state = e1
             j_l += 0.5 * h * (fs_l + f_l)
             j_r += 0.5 * h * (fs_r + f_r)
             p_state, fs_l, fs_r, c = p1, f_l, f_r, 1 - c
@@ -1442,7 +1457,7 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
             fail(counters, TOO_MANY_SUBSTEPS, ks.switching[0])
         if counters.status != OK:
             counters.bad_time = tev
-            return 0, 0.0, 0.0
+            return 0, 0.0, 0.0, 0.0
         if last:
             break
         done += te
@@ -1458,7 +1473,8 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     if edge_r >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, hi + 1, fs_r,
                          j_r - 0.5 * dt * (f0_r + fs_r), True)
-    return 0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass
+    return (0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass,
+            work - 0.5 * dt * (e_start + e_state))
 
 
 @njit(cache=True)
@@ -1467,7 +1483,8 @@ def save_counters(ks, k):
     c, s = ks.counters[0], ks.saved[k]
     s.events, s.d_hysteresis, s.power, s.substeps = c.events, c.d_hysteresis, c.power, c.substeps
     s.chatter_time, s.chatter_count = c.chatter_time, c.chatter_count
-    ks.saved_chatter[k, :, :] = ks.chatter
+    for i in range(CHAT_CAP):
+        ks.saved_chatter[k, i, 0], ks.saved_chatter[k, i, 1] = ks.chatter[i, 0], ks.chatter[i, 1]
 
 
 @njit(cache=True)
@@ -1480,7 +1497,17 @@ def restore_counters(ks, k):
         ks.closed[j] = not ks.closed[j]
     c.events, c.d_hysteresis, c.power, c.substeps = s.events, s.d_hysteresis, s.power, s.substeps
     c.chatter_time, c.chatter_count = s.chatter_time, s.chatter_count
-    ks.chatter[:, :] = ks.saved_chatter[k]
+    for i in range(CHAT_CAP):
+        ks.chatter[i, 0], ks.chatter[i, 1] = ks.saved_chatter[k, i, 0], ks.saved_chatter[k, i, 1]
+
+
+@njit(cache=True)
+def drop_window(win, k, count):
+    """Remove window k of ``count`` (rows after it move up; a loop: the kernel allocates
+    nothing, since its loop runs without numba's reference counting); returns the count."""
+    for i in range(k, count - 1):
+        win[i, 0], win[i, 1] = win[i + 1, 0], win[i + 1, 1]
+    return count - 1
 
 
 @njit(cache=True)
@@ -1493,8 +1520,7 @@ def widen(win, k, count, grow):
         win[k, 1] += 1
     while k + 1 < count and win[k + 1, 0] <= win[k, 1] + 2:
         win[k, 1] = max(win[k, 1], win[k + 1, 1])
-        win[k + 1:count - 1] = win[k + 2:count].copy()
-        count -= 1
+        count = drop_window(win, k + 1, count)
     return count
 
 
@@ -1505,19 +1531,22 @@ def local_events(flags, params, old, new, t0, dt, ks):
     window that must take in a neighbour is undone, widened and stepped again; one that comes
     within two beads of the window before it is joined with it, and the step's windows are
     all stepped again (rare).  Returns what the windows add to the step's trapezoid of the
-    damping power and to its end power."""
+    damping power, to its end power and to its trapezoid of the excitations' power, and
+    their count (``ks.windows``)."""
     win = ks.windows
     count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
     save_counters(ks, 0)
-    viscous, power, k = 0.0, 0.0, 0
+    viscous, power, work, k = 0.0, 0.0, 0.0, 0
     while k < count:
         save_counters(ks, 1)
-        grow, dv, dp = resolve_window(flags, params, old, new, ks, win[k, 0], win[k, 1], t0, dt)
+        grow, dv, dp, dw = resolve_window(flags, params, old, new, ks, win[k, 0], win[k, 1],
+                                          t0, dt)
         if ks.counters[0].status != OK:
-            return 0.0, 0.0
+            return 0.0, 0.0, 0.0, 0
         if grow == 0:
             viscous += dv
             power += dp
+            work += dw
             k += 1
             continue
         restore_counters(ks, 1)
@@ -1525,12 +1554,98 @@ def local_events(flags, params, old, new, t0, dt, ks):
         count = widen(win, k, count, grow)
         if k > 0 and win[k, 0] <= win[k - 1, 1] + 2:  # reaches a window already stepped
             win[k - 1, 1] = win[k, 1]
-            win[k:count - 1] = win[k + 1:count].copy()
-            count = widen(win, k - 1, count - 1, 0)
+            count = widen(win, k - 1, drop_window(win, k, count), 0)
             restore_counters(ks, 0)
-            viscous, power, k = 0.0, 0.0, 0
+            viscous, power, work, k = 0.0, 0.0, 0.0, 0
     ks.counters[0].windows += count
-    return viscous, power
+    return viscous, power, work, count
+
+
+# ---- the activity front: beads at rest are not stepped --------------------------------------
+# A bead at rest (v and a +0.0) whose neighbours are at rest too is a fixed point of the pass:
+# its x + h v_half is x, its contact forces and so its acceleration are those it had, bit for
+# bit.  The beads of the chain that are not all at rest lie in the *front*, a range of beads
+# that only grows (a disturbance reaches one bead further per step, in velocity Verlet); the
+# pass runs the segments that cover it.  The first step of a run steps every bead (the
+# accelerations of the initial state come from init_acc, not from the pass).
+@njit(inline="always")
+def at_rest(beads, b):
+    """Bead b exactly at rest: v and a +0.0 (a -0.0 would turn into +0.0 in a step) and x not
+    -0.0."""
+    x, v, a = beads.x[b], beads.v[b], beads.a[b]
+    return (v == 0.0 and a == 0.0 and math.copysign(1.0, v) > 0.0
+            and math.copysign(1.0, a) > 0.0 and (x != 0.0 or math.copysign(1.0, x) > 0.0))
+
+
+@njit(cache=True)
+def moving_hull(beads):
+    """First and last bead not at rest (first > last: none)."""
+    n = beads.x.shape[0]
+    lo = 0
+    while lo < n and at_rest(beads, lo):
+        lo += 1
+    hi = n - 1
+    while hi >= lo and at_rest(beads, hi):
+        hi -= 1
+    return lo, hi
+
+
+@njit(cache=True)
+def step_range(walls, ks, n):
+    """The segments the step's pass runs (``counters.seg_first .. seg_last``): those whose
+    pass finishes the front's beads (the bead left of a segment's first contact is finished
+    with the segment before), every segment while the front is not known; returns the
+    number of beads they finish."""
+    c, seg = ks.counters[0], ks.seg
+    m = ks.closed.shape[0]
+    lo, hi = c.front_lo, c.front_hi
+    if lo < 0 or seg.count == 1:
+        c.seg_first, c.seg_last = 0, seg.count - 1
+        return n
+    if lo > hi:
+        c.seg_first, c.seg_last = 0, -1
+        return 0
+    rshift = 0 if walls else 1  # bead b is finished at its right contact b + 1 - rshift
+    c.seg_first = max(lo - rshift, 0) // seg.size
+    c.seg_last = min(hi + 1 - rshift, m - 1) // seg.size
+    return min((c.seg_last + 1) * seg.size, n) - c.seg_first * seg.size
+
+
+@njit(cache=True)
+def advance_front(flags, params, start, new, ks, windows):
+    """The front after a step into ``new``.  After the first step, the beads not at rest at
+    its start (``start``: :func:`moving_hull` of it) or end, and one bead more on each side.
+    After the others, the front takes in the step's event windows and their neighbours, then
+    grows while its edge bead or the one beyond is not at rest.  A pulse's bead is always in
+    it; with a base motion every bead is."""
+    c = ks.counters[0]
+    n = new.x.shape[0]
+    if flags[BASE]:
+        c.front_lo, c.front_hi = 0, n - 1
+        return
+    if c.front_lo < 0:
+        lo, hi = moving_hull(new)
+        if start[0] <= start[1]:
+            lo, hi = (min(lo, start[0]), max(hi, start[1])) if lo <= hi else start
+        if lo <= hi:
+            lo, hi = lo - 1, hi + 1
+    else:
+        lo, hi = c.front_lo, c.front_hi
+        for k in range(windows):
+            lo, hi = min(lo, ks.windows[k, 0] - 1), max(hi, ks.windows[k, 1] + 1)
+        lo, hi = max(lo, 0), min(hi, n - 1)
+        if lo <= hi:
+            while hi < n - 1 and not (at_rest(new, hi) and at_rest(new, hi + 1)):
+                hi += 1
+            while lo > 0 and not (at_rest(new, lo) and at_rest(new, lo - 1)):
+                lo -= 1
+    if flags[PULSE]:
+        b = params.drive.bead
+        lo, hi = (min(lo, b - 1), max(hi, b + 1)) if lo <= hi else (b - 1, b + 1)
+    if lo > hi:  # every bead at rest
+        c.front_lo, c.front_hi = n, n - 1
+    else:
+        c.front_lo, c.front_hi = max(lo, 0), min(hi, n - 1)
 
 
 @njit(inline="always")
@@ -1550,23 +1665,28 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
         t0 = counters.step * dt
         o = counters.current
         old, new = copies[o], copies[1 - o]
+        start = moving_hull(old) if counters.front_lo < 0 else (0, -1)  # once in a run
+        counters.bead_steps += step_range(flags[WALLS], ks, old.x.shape[0])
         counters.flagged = 0
         p1 = verlet_pass(flags, params, old, new, dt, t0, ks, run_segments)
         if counters.status != OK:
             counters.bad_time = t0 + dt
             return
         p0 = counters.power
-        viscous, power = 0.0, 0.0
+        viscous, power, work, windows = 0.0, 0.0, 0.0, 0
         if flags[LOCATE] and counters.flagged > 0:
-            viscous, power = local_events(at_run_time(flags), params, old, new, t0, dt, ks)
+            viscous, power, work, windows = local_events(at_run_time(flags), params, old, new,
+                                                         t0, dt, ks)
             if counters.status != OK:
                 return
+        advance_front(at_run_time(flags), params, start, new, ks, windows)
         counters.d_viscous += 0.5 * dt * (p0 + p1) + viscous
         counters.power = p1 + power
         counters.current = 1 - o
         if flags[PULSE] or flags[BASE]:  # the excitations' work, by the same rule
-            pe = external_power(at_run_time(flags), params, new, t0 + dt)
-            counters.work += 0.5 * dt * (counters.ext_power + pe)
+            pe = external_power(at_run_time(flags), params, new, t0 + dt, 0,
+                                new.x.shape[0] - 1)
+            counters.work += 0.5 * dt * (counters.ext_power + pe) + work
             counters.ext_power = pe
         counters.step += 1
 
@@ -1600,6 +1720,7 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         block.counts[k, 1] = counters.substeps
         block.counts[k, 2] = counters.windows
         block.counts[k, 3] = counters.widened
+        block.counts[k, 4] = counters.bead_steps
     return nframes
 
 
@@ -1725,7 +1846,7 @@ def _make_advance(flags, nrt: bool):
         xn, vn, an = new
         closed = ks.closed
         size, count, real, ints, flag, ev_real, ev_contact, kicked = ks.seg
-        for s in prange(count):
+        for s in prange(ks.counters[0].seg_first, ks.counters[0].seg_last + 1):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
                        ForceTable(t_coef, t_base, t_scale, t_last, t_step),
