@@ -287,7 +287,24 @@ class ChainModel:
 
     def contact_energy(self, x, closed) -> float:
         delta = self.compressions(x)
-        return float(np.sum(np.where(closed, self.contact_law_energy(delta), 0.0)))
+        return float(np.sum(self.closed_contact_energies(delta, closed)))
+
+    def closed_contact_energies(self, delta, closed) -> np.ndarray:
+        """``np.where(closed, contact_law_energy(delta), 0.0)`` (any shape), the law evaluated
+        once for every contact at ``delta = 0`` (a long chain's contacts at rest: the Newton
+        iterations of the Schwarz energy cost ~0.25 us a contact) and at the others alone:
+        bitwise the same, the law being elementwise."""
+        delta = np.asarray(delta, dtype=float)
+        if self.mixture is not None:
+            return np.where(closed, self.contact_law_energy(delta), 0.0)
+        out = np.zeros(delta.shape)
+        moved = closed & (delta != 0.0)
+        out[moved] = self.law_energy(delta[moved])
+        rest = closed & (delta == 0.0)
+        if rest.any():
+            zero = self.law_energy(np.array([0.0, -0.0]))
+            out[rest] = np.where(np.signbit(delta[rest]), zero[1], zero[0])
+        return out
 
     @cached_property
     def _schwarz_energy_constants(self) -> tuple:
@@ -364,7 +381,7 @@ class ChainModel:
         delta = self._block_differences(x)
         if self.gap:
             delta = delta - self.gap
-        contact = np.sum(np.where(closed, self.contact_law_energy(delta), 0.0), axis=1)
+        contact = np.sum(self.closed_contact_energies(delta, closed), axis=1)
         if self.drive is not None and self.drive.base is not None:
             x = x - self.drive.base.position(t)[:, None]
         if mix is not None and mix.free_beads:

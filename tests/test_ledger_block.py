@@ -61,3 +61,16 @@ def test_fast_frames_carry_their_ledgers():
         got = f.ledger(b.model)
         assert [float(a).hex() for a in got.values()] == [float(b).hex() for b in one.values()]
     assert {len(f.block) for f in frames} == {1, 600}  # t = 0 alone, then one kernel call
+
+
+@pytest.mark.parametrize("name, overrides", SCENES)
+def test_contacts_at_rest_take_the_law_once(name, overrides):
+    """The ledger evaluates the law once for the contacts at delta = +0 and -0 (a long chain
+    at rest) and elementwise for the others: bitwise the law applied to every contact."""
+    model = model_from_scene(load_scene(name, overrides))
+    rng = np.random.default_rng(7)
+    delta = rng.normal(0.0, 0.3, (30, 200))
+    delta[:, ::3], delta[:, 1::7] = 0.0, -0.0
+    closed = rng.random(delta.shape) < 0.8
+    every = np.where(closed, model.contact_law_energy(delta), 0.0)
+    assert every.tobytes() == model.closed_contact_energies(delta, closed).tobytes()

@@ -171,7 +171,7 @@ class FastBackend(Backend):
                                                         else "step-quantized events"),
                       "dt": self.dt, "threads": self.threads if self.flags.threaded else 1,
                       "steps": 0, "events": 0, "event_substeps": 0, "event_windows": 0,
-                      "event_windows_widened": 0, "bead_steps": 0,
+                      "event_windows_widened": 0, "bead_steps": 0, "front": None,
                       "contact_eval": contact_eval, "wall_time_s": 0.0, "kernel_s": 0.0}
         if contact_eval == "table":
             self.stats["table"] = dict(table_error)
@@ -466,6 +466,8 @@ class FastBackend(Backend):
                     stats["event_windows"] = int(block.counts[done - 1, 2])
                     stats["event_windows_widened"] = int(block.counts[done - 1, 3])
                     stats["bead_steps"] = int(block.counts[done - 1, 4])
+                    lo, hi = block.counts[done - 1, 5:7].tolist()
+                    stats["front"] = [lo + 1, hi + 1] if 0 <= lo <= hi else None
                     self._last = (frames, block.a, block.sums, done - 1)
                     yield frames
                 if error is not None:

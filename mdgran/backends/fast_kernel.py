@@ -316,21 +316,22 @@ class FrameBlock(NamedTuple):
     row ``k`` is frame ``first + k``.  ``sums[k]`` = ``(D_viscous, D_hysteresis, P, W,
     P_ext)`` (the excitations' work and its rate),
     ``counts[k]`` = ``(counters.events, counters.substeps, counters.windows,
-    counters.widened, counters.bead_steps)`` at that frame."""
+    counters.widened, counters.bead_steps, counters.front_lo, counters.front_hi)`` at that
+    frame."""
 
     x: np.ndarray  # [K, n]
     v: np.ndarray  # [K, n]
     a: np.ndarray  # [K, n]
     closed: np.ndarray  # [K, m] bool
     sums: np.ndarray  # [K, 5]
-    counts: np.ndarray  # [K, 5] int64
+    counts: np.ndarray  # [K, 7] int64
 
 
 def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
     """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
     return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
                       np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 5)),
-                      np.empty((frames, 5), dtype=np.int64))
+                      np.empty((frames, 7), dtype=np.int64))
 
 
 #: The kernel's counters and running sums (one record).
@@ -1721,6 +1722,8 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         block.counts[k, 2] = counters.windows
         block.counts[k, 3] = counters.widened
         block.counts[k, 4] = counters.bead_steps
+        block.counts[k, 5] = counters.front_lo
+        block.counts[k, 6] = counters.front_hi
     return nframes
 
 
