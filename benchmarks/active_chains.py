@@ -4,11 +4,16 @@
     python benchmarks/active_chains.py --sizes 1e3,1e4 --backends fast-1 --repeats 2
 
 Each point is micro-star's physics with ``chain.n = N`` and ``thermal.temperature = T``
-(``thermal.seed = 1``): at T = 0 the chain is struck at bead 1 and has one event in the run;
-at T = 2 every bead starts with a thermal velocity and contacts snap shut and apart all along
-the chain (about 0.08 events per bead per time unit).  A point runs in a process of its own
+(``thermal.seed = 1``), struck at bead 1 (v0 = 12): at T = 0 the beads the pulse has not
+reached are at rest (the fast backend steps only its activity front, so its ns per bead-step
+of the whole chain fall with N); at T = 1e-6 every bead moves, slightly, and contacts switch
+only where the pulse is (a quiet chain stepped whole); at T = 2 contacts snap shut and apart
+all along the chain (about 0.08 events per bead per time unit).  A point runs in a process of its own
 (``mpiexec -n 2`` for two ranks): set-up and one warm-up block of steps are not timed, then
-``--repeats`` blocks of the same number of steps are, each on its own.  Reported per point:
+``--repeats`` blocks of the same number of steps are, each on its own.  A block is
+``--block-time`` time units (800 steps by default) whatever N, so that every chain is
+timed over the same part of its history (a thermal chain's events are most frequent early:
+its damping takes its energy).  Reported per point:
 the median ns per bead-step of the stepping (wall time of the compiled loop for ``fast``, of
 LAMMPS's ``run`` for ``native``) with its min and max, the process's CPU ns per bead-step
 over the timed blocks (all threads of the process; rank 0's for ``native``), the events in
@@ -17,8 +22,8 @@ after each point says whether the two cores were idle.
 
 Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
-Targets: the active chain within 1.3x the quiet one at every N; two ranks at least 1.8x one
-rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``).
+Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at
+every N; two ranks at least 1.8x one rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``).
 """
 from __future__ import annotations
 
@@ -40,11 +45,7 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "active_chains.json"
 DT = 0.0025
 BACKENDS = ("fast-1", "fast-2", "native-1", "native-2")
-
-
-def steps_for(n: int, bead_steps: float) -> int:
-    """Steps per timed block: about ``bead_steps`` bead-steps, 40 to 20000 steps."""
-    return int(np.clip(bead_steps // n, 40, 20000))
+QUIET, ACTIVE = 1e-6, 2.0  # temperatures of the quiet chain stepped whole and the active one
 
 
 def scene_for(n: int, temperature: float, steps: int, blocks: int):
@@ -116,8 +117,8 @@ def worker(args):
 
 
 # ---- the driver -----------------------------------------------------------------------------
-def measure(n, temperature, backend, repeats, bead_steps, timeout):
-    steps = steps_for(n, bead_steps)
+def measure(n, temperature, backend, repeats, block_time, timeout):
+    steps = int(round(block_time / DT))
     ranks = 2 if backend == "native-2" else 1
     row = {"n": n, "temperature": temperature, "backend": backend, "steps_per_block": steps,
            "repeats": repeats, "loadavg_before": os.getloadavg()}
@@ -154,15 +155,13 @@ def measure(n, temperature, backend, repeats, bead_steps, timeout):
 
 
 def ratios(rows):
-    """Active / quiet per (backend, N), and 2 / 1 (threads or ranks) per (N, T), from the
-    medians (their spreads beside them)."""
+    """Active (T = 2) / quiet stepped whole (T = 1e-6) per (backend, N), and 2 / 1 (threads
+    or ranks) per (N, T), from the medians (the rows hold their spreads)."""
     done = {(r["backend"], r["n"], r["temperature"]): r for r in rows if "error" not in r}
     out = []
     for (backend, n, t), r in sorted(done.items()):
-        if t == 0:
-            continue
-        quiet = done.get((backend, n, 0.0))
-        if quiet is not None:
+        quiet = done.get((backend, n, QUIET))
+        if t == ACTIVE and quiet is not None:
             out.append({"backend": backend, "n": n, "active_over_quiet":
                         r["ns_per_bead_step_median"] / quiet["ns_per_bead_step_median"]})
         if backend.endswith("-2"):
@@ -177,11 +176,11 @@ def ratios(rows):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1e3,1e4,1e5,1e6")
-    ap.add_argument("--temperatures", type=float, nargs="+", default=[0.0, 2.0])
+    ap.add_argument("--temperatures", type=float, nargs="+", default=[0.0, QUIET, ACTIVE])
     ap.add_argument("--backends", nargs="+", default=list(BACKENDS), choices=BACKENDS)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--bead-steps", type=float, default=4e8,
-                    help="bead-steps per timed block (steps = this / N, 40 to 20000)")
+    ap.add_argument("--block-time", type=float, default=2.0,
+                    help="time units per timed block (800 steps at dt = 0.0025)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per point")
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
@@ -196,7 +195,7 @@ def main(argv=None):
     for n in (int(float(s)) for s in args.sizes.split(",")):
         for backend in args.backends:
             for t in args.temperatures:
-                row = measure(n, t, backend, args.repeats, args.bead_steps, args.timeout)
+                row = measure(n, t, backend, args.repeats, args.block_time, args.timeout)
                 rows.append(row)
                 print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
                       flush=True)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -223,6 +224,9 @@ def cmd_run(args) -> int:
     from .storage import StorageError
 
     check_out_file(args.out, args.scene)
+    if not math.isfinite(args.checkpoint) or args.checkpoint < 0:
+        raise UsageError(f"--checkpoint: must be a number of seconds >= 0 (0: no checkpoints), "
+                         f"not {args.checkpoint}")
     scene = _load(args)
     small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
     try:
@@ -247,6 +251,12 @@ def cmd_run(args) -> int:
               f"{_events_in(args.out, st.get('events', '?'))} events, "
               f"wall {st.get('wall_time_s', float('nan')):.2f} s, "
               f"ledger error {res.max_ledger_error:.2e} of E_imp (bound {res.ledger_bound:.2e})")
+        if st.get("bead_steps") is not None and st.get("steps"):
+            full = scene.data["chain"]["n"] * st["steps"]
+            front = st.get("front")
+            reach = f", beads {front[0]}-{front[1]} in motion" if front else ""
+            print(f"bead-steps taken: {st['bead_steps']:.3g} of {full:.3g} "
+                  f"({st['bead_steps'] / full:.3g}; beads at rest are not stepped){reach}")
         if res.trajectory is not None:
             from .budget import format_budget, term_budget
 

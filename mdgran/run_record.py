@@ -196,7 +196,12 @@ class Run:
 
     @property
     def impulse_energy(self) -> float:
-        """``E_imp = v0^2 / 2`` of the scene's impulse (0 without one; units of eta p)."""
+        """``E_imp = m_b v0^2 / 2`` of the scene's impulse, ``m_b`` the struck bead's mass
+        (:attr:`mdgran.scene.Scene.impulse_energy`; ``v0^2 / 2`` for a record without its
+        scene; 0 without an impulse; units of eta p)."""
+        scene = self.scene
+        if scene is not None:
+            return scene.impulse_energy
         return 0.5 * float(self._data.get("impulse", {}).get("velocity", 0.0)) ** 2
 
     # ---- sizes, numbering, states ------------------------------------------------------------
@@ -246,7 +251,8 @@ class Run:
         """The energy ledger errors are measured in (:func:`ledger_scale`)."""
         drive = (bool(self._data.get("pulse", {}).get("amplitude"))
                  or self._data.get("base", {}).get("kind", "none") != "none")
-        e_in = self.scene.energy_scale if drive else self.impulse_energy
+        e_in = self.scene.energy_scale if drive and self.scene is not None else (
+            self.impulse_energy)
         return ledger_scale(e_in, self.e0)
 
     def ledger_error(self, scale: float | None = None) -> np.ndarray:

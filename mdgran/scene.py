@@ -175,9 +175,9 @@ SCHEMA = {
     "impulse": {
         "bead": Key(1, "int>=1", "an integer from 1 to chain.n", "",
                     "bead that gets the impulse (1-based)"),
-        "velocity": Key(1.0, "float", "a number with |v| <= 1e3 (p per time unit; faster "
+        "velocity": Key(1.0, "float", "a number with |v| <= 5e3 (p per time unit; faster "
                         "impulses leave the precision the event location needs)", "p q",
-                        "v0, positive from bead 1 towards bead n; E_imp = v0^2 / 2"),
+                        "v0, positive from bead 1 towards bead n; E_imp = m v0^2 / 2"),
         "velocity_si": Key(None, "float?", "a finite number in m/s (needs [material])", "m/s",
                            "impulse.velocity in SI (needs [material])"),
     },
@@ -351,6 +351,8 @@ OTHER_WAYS = {
 
 
 def _check_value(key: str, value, kind, allowed: str):
+    if isinstance(value, np.generic):  # a NumPy number or bool is one
+        value = value.item()
     if value is None:
         if isinstance(kind, str) and (kind.endswith("?") or kind == "fc"):
             return None

@@ -252,6 +252,10 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     process runs a run of its own (a sweep case on an MPI worker rank) and writes its own ``out``
     whatever its rank.
     """
+    if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or not isinstance(
+            checkpoint_every, (int, float)) or not 0 <= checkpoint_every < math.inf):
+        raise SceneError("checkpoint_every", "must be a number of seconds >= 0, or None (no "
+                         f"checkpoints), not {checkpoint_every!r}")
     writes = not collective or mpi_rank() == 0
     check_resources(scene, out if writes else None, keep)
     b = make_backend(scene, backend, **options)

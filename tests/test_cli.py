@@ -170,3 +170,32 @@ def test_override_replaces_si_key_and_keeps_scene_name(capsys):
     info = json.loads(capsys.readouterr().out)
     assert info["scene"] == "micro-star" and info["k1"] == 0.005
     assert info["k1_N_per_m"] == pytest.approx(0.005 * 1775.84, rel=1e-4)
+
+
+def test_fast_run_says_how_many_bead_steps_it_took(tmp_path, capsys):
+    """micro-star with 5,000 beads struck at bead 1: the pulse reaches a few tens of beads by
+    t = 5, and the run says that it stepped the segments holding them (2,048 beads a step,
+    the first step every bead), not 5,000 beads a step."""
+    out = tmp_path / "r.h5"
+    assert main(["run", "micro-star", "--backend", "fast", "--out", str(out), "--set",
+                 "chain.n=5000", "--set", "run.duration=5", "--set", "output.bead_stride=0",
+                 "--set", "run.output_interval=1"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "bead-steps" in x)
+    steps = 2000  # t = 5 at dt = 0.0025
+    taken = 5000 + 2048 * (steps - 1)
+    assert line.startswith(f"bead-steps taken: {taken:.3g} of {5000 * steps:.3g}"), line
+    assert "beads 1-" in line
+
+
+@pytest.mark.parametrize("value", ["nan", "-5", "inf"])
+def test_checkpoint_interval_must_be_a_number_of_seconds(value, tmp_path, capsys):
+    """``--checkpoint nan`` or a negative interval is refused with one line and exit 2 (it was
+    taken as 'no checkpoints'), before anything runs; the API refuses the same values."""
+    out = tmp_path / "r.h5"
+    assert main(["run", "micro-star", "--out", str(out), f"--checkpoint={value}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--checkpoint" in err[0] and not out.exists()
+    from mdgran.scene import SceneError
+
+    with pytest.raises(SceneError, match="checkpoint_every"):
+        run(load_scene("micro-star"), "reference", out=out, checkpoint_every=float(value))

@@ -10,7 +10,7 @@ import pytest
 from mdgran import analysis as an
 from mdgran.chain import contact_numbers, replay_states
 from mdgran.run_record import Run, ledger_scale, read_h5
-from mdgran.scene import load_scene
+from mdgran.scene import builtin_scenes, load_scene
 from mdgran.simulation import run
 
 
@@ -119,3 +119,15 @@ def test_measures_are_computed_once(macro, monkeypatch):
     assert co["p_value"] == ref["p_value"] and np.array_equal(co["rate_peaks"], ref["rate_peaks"])
     assert np.array_equal(case.c_eff, an.case_of_run(fresh).c_eff)
     assert np.array_equal(ch["viscous"], an.channel_damping(fresh)["viscous"])
+
+
+@pytest.mark.parametrize("name", sorted(builtin_scenes()))
+def test_the_record_measures_the_ledger_as_the_run_does(name):
+    """Every built-in scene, 1 time unit on the reference: the run record's ledger error
+    (read back from the record alone) is the run's, in the same energy scale: the struck
+    bead's m v0^2 / 2 (mixed/striker's striker is 8x a chain bead) plus the excitations'."""
+    scene = load_scene(name, [("run.duration", 1.0), ("run.output_interval", 0.5)])
+    res = run(scene, "reference")
+    assert res.trajectory.ledger_scale() == pytest.approx(scene.energy_scale, rel=1e-12)
+    assert res.trajectory.max_ledger_error == pytest.approx(res.max_ledger_error, rel=1e-9,
+                                                            abs=1e-300)

@@ -43,3 +43,25 @@ def test_a_resolved_scene_resolves_again_to_itself(name):
     if data["contact"].get("fc") is not None:  # a scene that gives fc: lambda is only its default
         data["contact"].pop("lambda", None)
     assert resolve(data) == sc.data
+
+
+def test_numpy_numbers_are_numbers():
+    """A scene given as a dict may hold NumPy integers, floats and booleans (values computed
+    with NumPy): they are read as the Python numbers they are."""
+    import numpy as np
+
+    from mdgran.api import run as api_run
+
+    res = api_run({"chain": {"n": np.int64(4)}, "impulse": {"velocity": np.float32(2.0)},
+                   "run": {"duration": np.float64(1.0)}, "output": {"contacts": np.bool_(True)}})
+    assert res.status == "complete"
+    assert res.trajectory.x.shape[1] == 4
+
+
+def test_the_impulse_velocity_message_names_its_limit(capsys):
+    """The one-line refusal of impulse.velocity names the limit the check applies (5e3)."""
+    from mdgran.cli import main
+
+    assert main(["info", "micro-star", "--set", "impulse.velocity=5001"]) == 2
+    err = capsys.readouterr().err
+    assert "|v| <= 5e3" in err and "5001" in err
