@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .backends import BadSpec, get_backend, parse_spec
+from .backends import BadSpec, check_options, get_backend, parse_spec
 from .backends.base import IntegrationError
 from .checkpoint import CheckpointError
 from .progress import CompileNotice
@@ -193,7 +193,7 @@ def make_backend(scene, backend: str, **options):
         if key in options and options[key] != value:
             raise SceneError("backend", f"{backend!r} sets {key} = {value!r}, but "
                              f"{key} = {options[key]!r} was given too")
-    options = {**spec_options, **options}
+    options = check_options(name, {**spec_options, **options})
     try:
         b = get_backend(name)(scene, **options)
     except ImportError as exc:

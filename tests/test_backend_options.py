@@ -94,3 +94,26 @@ def test_cli_backend_spec_and_contact_flag(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("mdgran: --contact") or "--contact" in err.splitlines()[-1]
     assert not (tmp_path / "x.h5").exists()
+
+
+@pytest.mark.parametrize("spec, key", [
+    ("fast:table_points=1", "fast:table_points"), ("fast:delta_max=-5", "fast:delta_max"),
+    ("fast:dt=0", "fast:dt"), ("lammps:dt=nan", "lammps:dt"),
+    ("reference:tolerance=x", "reference:tolerance"),
+    ("fast:locate_events=maybe", "fast:locate_events"),
+    ("reference:tolerance=0", "reference:tolerance"),  # never ended
+    ("reference:tolerance=1", "reference:tolerance"),  # a bound of 64 E_imp
+    ("lammps:events=sometimes", "lammps:events")])
+def test_bad_option_value_is_one_line_exit_2(spec, key, tmp_path, capsys):
+    """An option's value goes through the checks of a scene key: one line naming
+    BACKEND:OPTION and what is allowed, exit 2, before anything runs (these gave tracebacks,
+    or were accepted)."""
+    from mdgran.cli import main
+
+    out = tmp_path / "r.h5"
+    assert main(["run", "micro-star", "--backend", spec, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{key}: must be" in err[0], err
+    assert not out.exists()
+    with pytest.raises(SceneError, match=key):
+        make_backend(load_scene("micro-star"), spec)

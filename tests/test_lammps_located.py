@@ -45,7 +45,7 @@ def test_options_and_order(plugin):
                        (dict(contact="native", events="exact"), "'located' or 'quantized'")):
         with pytest.raises(SceneError) as exc:
             make_backend(sc, "lammps", **bad)
-        assert exc.value.key == "events" and words in str(exc.value)
+        assert exc.value.key.endswith("events") and words in str(exc.value)
 
 
 def contact_phase(res):

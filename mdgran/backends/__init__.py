@@ -32,6 +32,44 @@ SPEC_WORDS = {
 }
 
 
+#: option -> (kind, what is allowed): the options a spec or a keyword may give a backend, checked
+#: as scene keys are (:mod:`mdgran.scene`'s kinds; ``OPTION_LIMITS`` bounds numbers) before the
+#: backend is built; options that are objects (``comm``, ``extra_commands``, ``table_file``)
+#: are the backend's to check, and one a backend does not take is refused by it
+OPTION_RULES = {
+    "dt": ("float>0", "a finite number > 0 that divides run.output_interval"),
+    "threads": ("int>=0", "an integer >= 0 (0: every core the process may use)"),
+    "tolerance": ("tol", "a number in [1e-14, 1e-3]"),
+    "locate_events": ("bool", "true or false"),
+    "contact_eval": (("table", "exact"), "'table' or 'exact'"),
+    "table_points": ("int>=1", "an integer from 16 to 1000000"),
+    "delta_max": ("float>0", "a number from 1 to 1e4 (p)"),
+    "contact": (("hook", "native"), "'hook' or 'native'"),
+    "events": (("located", "quantized"), "'located' or 'quantized'"),
+}
+OPTION_LIMITS = {"table_points": (16, 1_000_000), "delta_max": (1.0, 1e4)}
+
+
+def check_options(name: str, options: dict) -> dict:
+    """``options`` of backend ``name`` checked against :data:`OPTION_RULES` (numbers as the
+    numbers they are); a bad one is a :class:`~mdgran.scene.SceneError` on key
+    ``NAME:OPTION``, one line saying what is allowed."""
+    from ..scene import SceneError, _check_value
+
+    out = dict(options)
+    for key, value in options.items():
+        if key not in OPTION_RULES:
+            continue
+        kind, allowed = OPTION_RULES[key]
+        label = f"{name}:{key}"
+        value = _check_value(label, value, kind, allowed)
+        lo, hi = OPTION_LIMITS.get(key, (None, None))
+        if lo is not None and not lo <= value <= hi:
+            raise SceneError(label, f"must be {allowed}, not {value}")
+        out[key] = value
+    return out
+
+
 class BadSpec(ValueError):
     """A backend spec that names no backend or an unknown word: one line saying what is allowed."""
 

@@ -350,6 +350,8 @@ COUNTERS = np.dtype([
     ("front_hi", np.int64),  # its last bead (front_lo > front_hi: every bead at rest)
     ("seg_first", np.int64),  # the segments the step's pass runs (:func:`step_range`)
     ("seg_last", np.int64),
+    ("pass_lo", np.int64),  # and the contacts it runs in them: pass_lo .. pass_hi - 1
+    ("pass_hi", np.int64),
     ("bead_steps", np.int64),  # beads stepped so far (passes over the segments run)
     ("d_viscous", np.float64),  # D_viscous
     ("d_hysteresis", np.float64),  # D_hysteresis
@@ -740,22 +742,24 @@ def refinish(flags, params, old, vn, closed, h, now, b):
 
 
 @njit(cache=True)
-def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, j0, j1, count, s, fv_first,
+def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, row, j0, j1, count, fv_first,
                 fv_last):
-    """The mean-force kicks of segment s's contacts ``kicked[j0: j0 + count]`` (in the band
-    near snap-off), after its pass: the velocities of the beads next to them that the pass
-    finished, redone with each contact's ``Fv`` (:func:`pass_force`) by the pass's
-    operations, and the segment's first and last ``Fv``; returns those two.  Out of the
-    pass's loop, whose registers a call inside it cost 20-30 % on a chain of unlike beads."""
+    """The mean-force kicks of a segment's contacts ``kicked[row: row + count]`` (in the band
+    near snap-off; its pass ran contacts j0 .. j1 - 1), after its pass: the velocities of
+    the beads next to them that the pass finished, redone with each contact's ``Fv``
+    (:func:`pass_force`) by the pass's operations, and the pass's first and last ``Fv``;
+    returns those two.  Out of the pass's loop, whose registers a call inside it cost 20-30 %
+    on a chain of unlike beads."""
     n = old.x.shape[0]
     rshift = 0 if flags[WALLS] else 1
     now = drive_at(flags, params, t0 + h)
     # the beads this pass finished: the left bead of each of its contacts but the first's when
-    # s > 0 (finish_edge does it) and the walls; the last bead is finished after it
-    lo = max(j0 + rshift - (0 if s > 0 else 1), 0)
+    # j0 > 0 (finish_edge does it, or it is at rest) and the walls; the last bead is
+    # finished after it
+    lo = max(j0 + rshift - (0 if j0 > 0 else 1), 0)
     hi = min(j1 + rshift - 2, n - 1)
     for k in range(count):
-        j = kicked[j0 + k]
+        j = kicked[row + k]
         if j == j0:
             fv_first = pass_force(flags, params, old, closed, h, j)[1]
         if j == j1 - 1:
@@ -779,12 +783,15 @@ def quantized_due(closed, d, delta_off):
 @njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
-    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked)``): returns
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, jlo,
+    jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
+    front being at rest, :func:`step_range`): returns
     its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
     first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
     switches, status, its contact); the first flagged contacts go into row ``s`` of ``flag``,
     the switches into ``ev_*``.  The bead left of its first contact is left to
-    :func:`merge_segments` (both its contact forces are needed).  The arrays it writes are
+    :func:`merge_segments` (both its contact forces are needed), or at rest if the pass
+    starts inside the segment.  The arrays it writes are
     arguments, not fields of a record: numba's parallel loop drops writes made through a
     record built inside it (:func:`run_segments`).
 
@@ -798,15 +805,16 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    h, t0, size, flag, ev_real, ev_contact, kicked = seg
+    h, t0, size, flag, ev_real, ev_contact, kicked, jlo, jhi = seg
     walls = flags[WALLS]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
     # unsigned indices: numba emits no negative-index wraparound code for them
     n = np.uint64(xo.shape[0])
     one = np.uint64(1)
-    j0 = np.uint64(s * size)
-    j1 = min(j0 + np.uint64(size), np.uint64(closed.shape[0]))
+    row = np.uint64(s * size)  # the segment's first row of ev_* and kicked
+    j0 = max(row, np.uint64(jlo))
+    j1 = min(row + np.uint64(size), np.uint64(jhi))
     hh = 0.5 * h
     gap, c, doff = params.gap, params.damping, params.delta_off
     nflag = 0
@@ -839,7 +847,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             doff = pair_at(params, k, P_OFF)
             im_l, g_l = pair_at(params, k, P_INV_MASS), pair_at(params, k, P_ON_SITE)
         if not flags[LOCATE] and quantized_due(closed[j], d, doff):
-            k = j0 + np.uint64(nev)
+            k = row + np.uint64(nev)
             ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
                 flags, params, j, d, doff, xo, h, t0, closed)
             nev += 1
@@ -851,7 +859,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             fv_r = f_r
             # near snap-off: the mean-force kick, after the loop (apply_kicks)
             if in_kick_band(flags, params, j, d):
-                kicked[j0 + np.uint64(nkick)] = np.int64(j)
+                kicked[row + np.uint64(nkick)] = np.int64(j)
                 nkick += 1
             if flags[DAMPED]:
                 f_r += c * r
@@ -870,7 +878,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
                 nflag += 1
         if j == j0:  # the segment's edge: its first contact's force, for merge_segments
             f_first, fv_first = f_r, fv_r
-        if rb >= one and (j > j0 or s == 0):  # finish the left bead
+        if rb >= one and (j > j0 or j0 == 0):  # finish the left bead
             a, av = bead_accelerations(f_l - f_r, fv_l - fv_r, x_c, ve_c, im_l, g_l, flags,
                                        params, now)
             if flags[SUB_DAMPED]:
@@ -882,8 +890,8 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         f_l, fv_l = f_r, fv_r
     if nkick > 0:
         fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
-                                     kicked, np.int64(j0), np.int64(j1), nkick, s, fv_first,
-                                     fv_l)
+                                     kicked, np.int64(row), np.int64(j0), np.int64(j1), nkick,
+                                     fv_first, fv_l)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
@@ -981,7 +989,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
-                               seg.kicked), 0)
+                               seg.kicked, 0, ks.closed.shape[0]), 0)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
         log_switches(ks, 0)
@@ -1593,23 +1601,27 @@ def moving_hull(beads):
 
 @njit(cache=True)
 def step_range(walls, ks, n):
-    """The segments the step's pass runs (``counters.seg_first .. seg_last``): those whose
-    pass finishes the front's beads (the bead left of a segment's first contact is finished
-    with the segment before), every segment while the front is not known; returns the
-    number of beads they finish."""
+    """The contacts the step's pass runs, ``counters.pass_lo .. pass_hi - 1``, and their
+    segments ``seg_first .. seg_last``: those that finish the front's beads (bead b is
+    finished at its right contact, the pass starting one contact before, whose left bead is
+    at rest), every contact while the front is not known or the chain is one segment (a
+    chain of at most :data:`SEGMENT` contacts is stepped whole); returns the number of beads
+    they finish."""
     c, seg = ks.counters[0], ks.seg
     m = ks.closed.shape[0]
     lo, hi = c.front_lo, c.front_hi
     if lo < 0 or seg.count == 1:
-        c.seg_first, c.seg_last = 0, seg.count - 1
+        c.seg_first, c.seg_last, c.pass_lo, c.pass_hi = 0, seg.count - 1, 0, m
         return n
     if lo > hi:
-        c.seg_first, c.seg_last = 0, -1
+        c.seg_first, c.seg_last, c.pass_lo, c.pass_hi = 0, -1, 0, 0
         return 0
-    rshift = 0 if walls else 1  # bead b is finished at its right contact b + 1 - rshift
-    c.seg_first = max(lo - rshift, 0) // seg.size
-    c.seg_last = min(hi + 1 - rshift, m - 1) // seg.size
-    return min((c.seg_last + 1) * seg.size, n) - c.seg_first * seg.size
+    rshift = 0 if walls else 1  # bead b's contacts: b - rshift (left), b + 1 - rshift (right)
+    c.pass_lo = max(lo - rshift, 0)
+    c.pass_hi = min(hi + 1 - rshift, m - 1) + 1
+    c.seg_first = c.pass_lo // seg.size
+    c.seg_last = (c.pass_hi - 1) // seg.size
+    return min(hi + 1, n) - lo
 
 
 @njit(cache=True)
@@ -1825,9 +1837,9 @@ def _make_advance(flags, nrt: bool):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
-        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked = seg
+        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, jlo, jhi = seg
         r, i = segment_pass(literal, params, old, xn, vn, an, closed,
-                            (h, t0, size, flag, ev_real, ev_contact, kicked), s)
+                            (h, t0, size, flag, ev_real, ev_contact, kicked, jlo, jhi), s)
         for k in range(5):
             real[s, k] = r[k]
         for k in range(4):
@@ -1849,6 +1861,7 @@ def _make_advance(flags, nrt: bool):
         xn, vn, an = new
         closed = ks.closed
         size, count, real, ints, flag, ev_real, ev_contact, kicked = ks.seg
+        jlo, jhi = ks.counters[0].pass_lo, ks.counters[0].pass_hi
         for s in prange(ks.counters[0].seg_first, ks.counters[0].seg_last + 1):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
@@ -1856,7 +1869,8 @@ def _make_advance(flags, nrt: bool):
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked), s)
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, jlo, jhi),
+                        s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
