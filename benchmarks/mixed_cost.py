@@ -14,8 +14,8 @@ Cases (micro-star's physics, N + 1 beads so that a dimer touches both walls with
 Each (case, N) runs in a process of its own: set-up and one warm-up frame are not timed, then
 ``--repeats`` frames of the same number of steps are (the kernel's wall time per frame,
 ``stats["kernel_s"]``, over N x steps; and the process's CPU time per frame, ``cpu_*``, which
-a loaded machine's descheduling does not count; a located event redoes the pass over the whole chain, so
-the events and event sub-steps of the last run are recorded beside it).  The cases alternate, ``--rounds`` times, so that a
+a loaded machine's descheduling does not count; a located event steps its window of beads
+again, so the events and event sub-steps of the last run are recorded beside it).  The cases alternate, ``--rounds`` times, so that a
 change in the machine's load reaches every case alike; medians and spreads (max - min) over
 every timed frame of a case.  Load averages and the busy processes (ps) at the start are
 recorded: the 2 cores may be shared.  Writes benchmarks/results/mixed_cost.json.

@@ -103,7 +103,7 @@ def test_momentum_is_kept_through_events(n, seed, gap, segment):
                        run={"duration": 5.0, "output_interval": 0.5, "dt": 0.0025})
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(fk, "SEGMENT", segment)
-        res = run(scene, "fast")
+        res = run(scene, "fast", threads=1)
     assert res.status == "complete"
     p = res.trajectory.v.sum(axis=1)
     scale = np.abs(res.trajectory.v).sum(axis=1).max()

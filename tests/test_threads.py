@@ -72,9 +72,9 @@ def test_two_threads_give_the_one_thread_result_bitwise(name, options, extra, mo
 def test_long_chain_with_events_in_many_segments(n, segment, locate, monkeypatch):
     """Chains whose contacts start open and whose beads get thermal velocities, so that
     contacts close all along them: 10^5 beads in 49 segments of the default size with
-    step-quantized events, and 3000 beads in 47 segments of 64 with located events (each
-    located event redoes the pass over the whole chain, so a long chain with events
-    everywhere is slow there).  2 threads give the 1-thread result bitwise."""
+    step-quantized events, and 3000 beads in 47 segments of 64 with located events (event
+    windows in many segments, some across their edges).  2 threads give the 1-thread result
+    bitwise."""
     segment = segment or fk.SEGMENT
     scene = load_scene("micro-star", [("chain.n", n), ("chain.initial_gap", 0.002),
                                       ("thermal.temperature", 1e-3), ("run.duration", 1.0),

@@ -66,8 +66,8 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   element).  Undriven scenes take none of this.
 * **Located events** (``events="located"``, the default with the native contact): the fix
   integrates the chain itself (``fix move`` and ``fix substrate`` go) and splits each step at
-  its earliest contact event over all ranks, as the fast backend does: second order in dt
-  through snap events (``order = 2``; docs/lammps.md).  ``events="quantized"``: the hook's
+  its earliest contact event over all ranks (the fast backend steps an event's window of beads
+  alone instead): second order in dt through snap events (``order = 2``; docs/lammps.md).  ``events="quantized"``: the hook's
   step-quantized switching, bitwise the hook's run.
 """
 from __future__ import annotations
