@@ -203,8 +203,9 @@ class H5MDWriter:
         self.checkpoint_every = checkpoint_every
         self.state_source = state_source
         self.backend_name = backend_name
-        if checkpoint_every is not None:
-            self.tmp = self.path.with_name(f"{self.path.name}.partial")
+        partial = self.path.with_name(f"{self.path.name}.partial")
+        if checkpoint_every is not None or (resume and partial.exists()):
+            self.tmp = partial  # a resume without new checkpoints goes on in it all the same
         else:
             self.tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
         self.scene = scene
@@ -607,8 +608,8 @@ class H5MDWriter:
 
     def close(self, status):
         """Finish the file: rename it onto the requested name unless interrupted (then keep
-        ``NAME.partial`` with a checkpoint at the last frame if checkpointing is on, else
-        remove the temporary)."""
+        ``NAME.partial`` with a checkpoint at the last frame if checkpointing is on, or with the
+        checkpoint it was resumed from, else remove the temporary)."""
         if self.f is None:
             return
         try:
@@ -616,6 +617,8 @@ class H5MDWriter:
                 if self.checkpoint_every is not None:  # keep NAME.partial to resume from
                     self._guard(self.checkpoint)
                     self._guard(self.f.close)
+                elif self.tmp.name.endswith(".partial"):  # resumed, no new checkpoints: its own
+                    self._guard(self.f.close)  # (the frames after it are dropped on resume)
                 else:
                     self.f.close()
                     self.tmp.unlink(missing_ok=True)
