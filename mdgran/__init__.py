@@ -1,6 +1,6 @@
 """mdgran: simulation of 1-D adhesive micro-granular chains (Schwarz contact, elastic substrate).
 
-Everything inside the package is nondimensional (units of ``../shared/physics.md`` section 1):
+Everything inside the package is nondimensional (the units of :mod:`mdgran.units`):
 force ``eta = pi R w``, length ``p``, time ``1/q``, bead mass 1.  SI input is converted once,
 in :mod:`mdgran.units`.
 

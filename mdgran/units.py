@@ -1,4 +1,4 @@
-"""From a material in SI units to the scales of the nondimensional model (physics.md section 1).
+"""From a material in SI units to the scales of the nondimensional model (section 1 of the paper's model).
 
 Units are converted once, here; everything else in mdgran is nondimensional.
 

@@ -6,7 +6,7 @@
 // the fix integrates the chain itself and locates each contact event inside the step, as
 // mdgran's fast backend does: second order in dt through snap events (section "located events"
 // below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
-// units (../../../shared/physics.md section 1): bead mass 1, length p, force eta = pi R w,
+// units (mdgran/units.py): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
 //   fix ID all mdgran/chain keyword value ...
