@@ -1295,9 +1295,7 @@ def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
     nxt.a[b] = a
     nxt.v[b] = vh + 0.5 * h * av
     if flags[PULSE] and b == params.drive.bead:
-        da = drive_at(flags, params, t1)[2] * (params.mix.inv_mass[b] if flags[MIXED] else 1.0)
-        nxt.a[b] += da
-        nxt.v[b] += 0.5 * h * da
+        push_pulsed_bead(flags, params, nxt, h, t1)
     return substrate_power(ve - now[1], g, flags, params) if flags[SUB_DAMPED] else 0.0
 
 
@@ -1384,9 +1382,7 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     new.a[b] = a
     new.v[b] = vh + 0.5 * h * av + dj * im
     if flags[PULSE] and b == params.drive.bead:
-        da = drive_at(flags, params, t1)[2] * im
-        new.a[b] += da
-        new.v[b] += 0.5 * h * da
+        push_pulsed_bead(flags, params, new, h, t1)
 
 
 @njit(cache=True)
