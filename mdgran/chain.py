@@ -68,6 +68,14 @@ def contact_columns(contacts, walls: bool = True) -> np.ndarray:
     return np.asarray(contacts, dtype=np.int64) - first_contact(walls)
 
 
+def touching_contacts(n: int, walls: bool, lo: int, hi: int) -> tuple[int, int]:
+    """``(c0, c1)``: the 0-based contacts ``c0 .. c1 - 1`` that touch the 0-based beads
+    ``lo .. hi - 1`` (contact ``j`` joins beads ``j - 1`` and ``j`` with walls, ``j`` and
+    ``j + 1`` without)."""
+    w = 1 if walls else 0
+    return max(lo - 1 + w, 0), min(hi + w, n_contacts(n, walls))
+
+
 def initial_states(n: int, walls: bool = True, initial_gap: float = 0.0) -> np.ndarray:
     """The paper's initial contact states [n_contacts]: every contact closed at ``delta = 0``,
     or every contact open when the scene has an initial gap (``initial_gap > 0``)."""
@@ -99,6 +107,35 @@ def replay_states(initial, ev_time, ev_contact, ev_kind, times, walls: bool = Tr
         seen = last >= 0
         states[seen, cols[mine[0]]] = ev_kind[mine[last[seen]]]
     return states
+
+
+#: beads or contacts the ledger sums together (ChainModel.ledger_block): a chain of at most
+#: this many is one block; blocks of a long chain at rest cost nothing (mdgran.rest_blocks)
+LEDGER_BLOCK = 4096
+
+
+def dots(a, b) -> np.ndarray:
+    """``[np.dot(r, s) for r, s in zip(a, b)]`` of 2-D arrays (:func:`row_dots`)."""
+    return np.matmul(a[:, None, :], b[:, :, None])[:, 0, 0]
+
+
+def sum_blocks(sums: list, blocks: list, count: int, F: int, rest=None) -> np.ndarray:
+    """The row sums ``[F]`` of a quantity over ``count`` beads or contacts summed by blocks of
+    :data:`LEDGER_BLOCK`: ``sums`` ([F] each) of the blocks ``blocks`` (slices), the others'
+    from ``rest(length)`` (None: zeros, left out), added in block order.  Adding a block of
+    zeros changes no sum, so the result does not depend on which blocks of zeros were
+    computed."""
+    b = LEDGER_BLOCK
+    have = {s.start // b: part for s, part in zip(blocks, sums)}
+    total = None
+    for j in range(max(1, -(-count // b))):
+        part = have.get(j)
+        if part is None:
+            if rest is None:
+                continue
+            part = rest(min(count, (j + 1) * b) - j * b)
+        total = part if total is None else total + part
+    return np.zeros(F) if total is None else total
 
 
 def row_dots(a) -> np.ndarray:
@@ -280,15 +317,6 @@ class ChainModel:
         return p
 
     # ---- energy ledger ---------------------------------------------------------------------
-    def kinetic_energy(self, v) -> float:
-        if self.mixture is not None:
-            return 0.5 * float(np.dot(self.mixture.mass * v, v))
-        return 0.5 * float(np.dot(v, v))
-
-    def contact_energy(self, x, closed) -> float:
-        delta = self.compressions(x)
-        return float(np.sum(self.closed_contact_energies(delta, closed)))
-
     def closed_contact_energies(self, delta, closed) -> np.ndarray:
         """``np.where(closed, contact_law_energy(delta), 0.0)`` (any shape), the law evaluated
         once for every contact at ``delta = 0`` (a long chain's contacts at rest: the Newton
@@ -333,64 +361,59 @@ class ChainModel:
         pw = pow_ufunc()  # the C library's pow, as ContactLaw.energy (bitwise)
         return (0.4 * pw(t, 10.0) - c7 * pw(t, 7.0) + c4 * pw(t, 4.0) - c1 * t) - a0
 
-    def substrate_energy(self, x, t=0.0) -> float:
-        """``sum_i g_i (k1 y_i^2 / 2 + k3 y_i^4 / 4)``, ``y_i = x_i - u_b(t)``."""
-        if self.drive is not None and self.drive.base is not None:
-            x = x - self.drive.base_at(t)[0]
-        if self.mixture is not None and self.mixture.free_beads:
-            x = x * np.sqrt(self.mixture.substrate)  # g_i is 0 or 1
-        e = 0.0
-        if self.k1:
-            e += 0.5 * self.k1 * float(np.dot(x, x))
-        if self.k3:
-            e += 0.25 * self.k3 * float(np.sum(x**4))
-        return e
-
     def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
                external_work=0.0, t=0.0) -> dict:
         """The energy ledger of physics.md section 4 for one state at time t, with the
         excitations' work ``external_work`` (:mod:`mdgran.drive`): ``total = kinetic +
-        contact + substrate + dissipated - external_work``."""
-        led = {
-            "kinetic_energy": self.kinetic_energy(v),
-            "contact_energy": self.contact_energy(x, closed),
-            "substrate_energy": self.substrate_energy(x, t),
-            "dissipated_viscous": float(dissipated_viscous),
-            "dissipated_hysteresis": float(dissipated_hysteresis),
-        }
-        total = sum(led.values())
-        led["external_work"] = float(external_work)
-        led["total_energy"] = total - led["external_work"]
-        return led
+        contact + substrate + dissipated - external_work``; row 0 of :meth:`ledger_block`
+        (floats)."""
+        led = self.ledger_block(np.asarray(x, dtype=float)[None],
+                                np.asarray(v, dtype=float)[None], np.asarray(closed)[None],
+                                [dissipated_viscous], [dissipated_hysteresis],
+                                [external_work], [t])
+        return {term: float(value[0]) for term, value in led.items()}
 
     def ledger_block(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
-                     external_work=None, t=None) -> dict:
-        """:meth:`ledger` of ``F`` states at once: ``x``, ``v`` [F, n], ``closed``
-        [F, n_contacts], the dissipated energies, the external work and the times [F] (the
-        last two None: 0); each term an array [F].
+                     external_work=None, t=None, moved=None) -> dict:
+        """The ledger (:meth:`ledger`) of ``F`` states at once: ``x``, ``v`` [F, n],
+        ``closed`` [F, n_contacts], the dissipated energies, the external work and the times
+        [F] (the last two None: 0); each term an array [F].
 
-        Bitwise equal to :meth:`ledger` row by row: the same operations on every element in
-        the same order, and the row sums are numpy's (pairwise, per row, as for one state)
-        or BLAS's dot product (:func:`row_dots`), as :meth:`ledger`'s ``np.dot`` is."""
+        Each sum over beads or contacts is taken by blocks of :data:`LEDGER_BLOCK` (BLAS's
+        dot product, :func:`row_dots`, or numpy's pairwise sum within a block; the blocks'
+        sums added in order, :func:`sum_blocks`): a chain of at most ``LEDGER_BLOCK`` beads
+        is one block.  ``moved`` (:attr:`mdgran.backends.base.Frames.moved`): the beads
+        ``lo .. hi - 1`` outside which every bead is at ``x = v = +0`` and every contact in
+        its initial state; only the blocks that meet them are computed from the states (the
+        others' sums are those of beads and contacts at rest), and the result is bitwise the
+        same as without ``moved``: a long chain's ledger costs the beads that moved."""
         x, v = np.asarray(x, dtype=float), np.asarray(v, dtype=float)
-        mix = self.mixture
-        if mix is None:
-            kinetic = 0.5 * row_dots(v)
-        else:
-            kinetic = 0.5 * np.matmul((mix.mass * v)[:, None, :], v[:, :, None])[:, 0, 0]
-        delta = self._block_differences(x)
-        if self.gap:
-            delta = delta - self.gap
-        contact = np.sum(self.closed_contact_energies(delta, closed), axis=1)
+        closed = np.asarray(closed)
+        F = len(x)
         if self.drive is not None and self.drive.base is not None:
-            x = x - self.drive.base.position(t)[:, None]
+            moved = None  # the substrate acts on x - u_b everywhere
+        beads = self._live_blocks(self.n, moved, 0)
+        contacts = self._live_blocks(self.n_contacts, moved, 1)
+        mix = self.mixture
+        mass_v = v if mix is None else mix.mass * v
+        kinetic = 0.5 * sum_blocks([dots(mass_v[:, s], v[:, s]) for s in beads], beads, self.n,
+                                   F)
+        delta = self._block_differences(x, contacts)
+        energies = [np.sum(self.closed_contact_energies(d, closed[:, s]), axis=1)
+                    for d, s in zip(delta, contacts)]
+        contact = sum_blocks(energies, contacts, self.n_contacts, F, self._rest_contact_sums(F))
+        y = x
+        if self.drive is not None and self.drive.base is not None:
+            y = x - self.drive.base.position(t)[:, None]
         if mix is not None and mix.free_beads:
-            x = x * np.sqrt(mix.substrate)
-        substrate = np.zeros(len(x))
+            y = y * np.sqrt(mix.substrate)
+        substrate = np.zeros(F)
         if self.k1:
-            substrate = substrate + 0.5 * self.k1 * row_dots(x)
+            sq = sum_blocks([row_dots(y[:, s]) for s in beads], beads, self.n, F)
+            substrate = substrate + 0.5 * self.k1 * sq
         if self.k3:
-            substrate = substrate + 0.25 * self.k3 * np.sum(x**4, axis=1)
+            quart = sum_blocks([np.sum(y[:, s] ** 4, axis=1) for s in beads], beads, self.n, F)
+            substrate = substrate + 0.25 * self.k3 * quart
         led = {
             "kinetic_energy": kinetic,
             "contact_energy": contact,
@@ -398,23 +421,52 @@ class ChainModel:
             "dissipated_viscous": np.asarray(dissipated_viscous, dtype=float),
             "dissipated_hysteresis": np.asarray(dissipated_hysteresis, dtype=float),
         }
-        total = 0.0  # the terms added in the order of ledger()'s sum(led.values())
+        total = 0.0  # kinetic + contact + substrate + dissipated, in this order
         for term in led.values():
             total = total + term
-        work = np.zeros(len(x)) if external_work is None else np.asarray(external_work, float)
+        work = np.zeros(F) if external_work is None else np.asarray(external_work, float)
         led["external_work"] = work
         led["total_energy"] = total - work
         return led
 
-    def _block_differences(self, x):
-        """:meth:`differences` of each row of ``x`` [F, n]: ``[F, n_contacts]``."""
-        if self.walls:
-            d = np.empty((len(x), self.n + 1))
-            d[:, 0] = -x[:, 0]
-            d[:, 1:-1] = x[:, :-1] - x[:, 1:]
-            d[:, -1] = x[:, -1]
-            return d
-        return x[:, :-1] - x[:, 1:]
+    def _live_blocks(self, count, moved, contacts) -> list:
+        """The blocks of :data:`LEDGER_BLOCK` beads (``contacts = 0``) or contacts (1) of
+        ``count`` that meet ``moved`` (all without it), as slices."""
+        lo, hi = 0, count
+        if moved is not None:
+            lo, hi = moved
+            if contacts:
+                lo, hi = touching_contacts(self.n, self.walls, lo, hi)
+        b = LEDGER_BLOCK
+        return [slice(j * b, min(count, (j + 1) * b)) for j in range(lo // b, -(-hi // b))]
+
+    def _rest_contact_sums(self, F):
+        """The energy sum of a block of contacts at rest (initial state, ``delta = +0``),
+        from its length: ``fn(length) -> [F]``."""
+        if self.gap > 0 or self.mixture is not None:
+            return None  # open at rest: 0 (a mixture is always summed whole)
+        e0 = self.closed_contact_energies(np.zeros(1), np.ones(1, dtype=bool))[0]
+        return lambda length: np.full(F, np.sum(np.full(length, e0)))
+
+    def _block_differences(self, x, blocks) -> list:
+        """:meth:`differences` (minus the gap) of each row of ``x`` [F, n] for each slice of
+        contacts in ``blocks``: ``[F, len]`` each.  Contact ``j`` joins ``xp[j]`` and
+        ``xp[j + 1]``, ``xp = [0, x, 0]`` with walls (the walls' contacts ``-x_1`` and
+        ``x_n``), ``x`` without."""
+        w = 1 if self.walls else 0
+        out = []
+        for s in blocks:
+            c0, c1 = s.start, s.stop
+            b0, b1 = max(c0 - w, 0), min(c1 + 1 - w, self.n)  # the beads they join
+            xp = np.zeros((len(x), c1 + 1 - c0))
+            xp[:, b0 + w - c0:b1 + w - c0] = x[:, b0:b1]
+            d = xp[:, :-1] - xp[:, 1:]
+            if w and c0 == 0:
+                d[:, 0] = -x[:, 0]
+            if w and c1 == self.n_contacts:
+                d[:, -1] = x[:, -1]
+            out.append(d - self.gap if self.gap else d)
+        return out
 
     def initial_state(self, bead: int, velocity: float, closed: bool = True):
         """Paper's initial state: beads at rest at x = 0 except ``bead`` (1-based); every

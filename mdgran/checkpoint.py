@@ -10,7 +10,11 @@ are arrays (stored as datasets) or JSON scalars (stored in the ``meta`` attribut
      "scalars": {...}, "arrays": [...], "state_sha256": ..., "data_sha256": {path: ...}}
 
 ``data_sha256`` holds the SHA-256 of the first ``frames`` rows of every frame dataset (and of
-the first ``events`` events): the frames the checkpoint continues.  :func:`load` refuses with
+the first ``events`` events): the frames the checkpoint continues.  A dataset stored by column
+blocks (:mod:`mdgran.rest_blocks`: a long chain's per-bead series) is hashed row by row over its
+blocks that differ from the fill value, each with its index (``"data_digest": "blocks"``), so
+that the running hash costs what the writer writes; a checkpoint without that key hashed every
+value.  :func:`load` refuses with
 one line (:class:`CheckpointError`) a checkpoint of another backend or scene, a file that is
 not HDF5, and any checksum that does not match what is stored: a damaged checkpoint is never
 resumed, and it is left as it was.
@@ -23,7 +27,10 @@ import json
 import numpy as np
 
 GROUP = "checkpoint"
-ROWS = 4096  # rows hashed at a time when a checkpoint is verified
+ROWS = 4096  # rows hashed at a time when a checkpoint is verified ...
+READ_BYTES = 64 << 20  # ... and at most this many bytes of them
+#: ``meta["data_digest"]`` of a checkpoint whose column-block datasets are hashed by blocks
+BLOCKS = "blocks"
 EMPTY = hashlib.sha256().hexdigest()
 
 
@@ -48,27 +55,56 @@ def state_digest(scalars: dict, arrays: dict) -> str:
 
 class DataDigest:
     """Running SHA-256 of datasets that only grow by appended rows: hashing the rows as they
-    are appended gives the same digest as hashing the dataset's first rows at once."""
+    are appended gives the same digest as hashing the dataset's first rows at once.
 
-    def __init__(self):
+    A dataset stored by column blocks (:func:`mdgran.rest_blocks.sparse_width`) is hashed by
+    :meth:`update_blocks`: per row, each block holding a value other than the fill value, as
+    its index then its bytes, then a row mark; blocks of fill values (never written) cost
+    nothing."""
+
+    ROW = b"\x00row"
+
+    def __init__(self, blocks: bool = True):
         self._h = {}
+        self.blocks = blocks  # column-block datasets hashed by blocks (False: a resumed
+        #                       checkpoint that hashed every value goes on doing so)
 
     def update(self, path: str, rows, dtype):
         h = self._h.setdefault(path, hashlib.sha256())
         h.update(np.ascontiguousarray(rows, dtype=dtype).tobytes())
 
+    def update_blocks(self, path: str, rows, width: int, mask):
+        """Hash ``rows`` [F, n] by blocks of ``width`` columns, those set in ``mask``
+        [F, blocks] (:func:`mdgran.rest_blocks.block_mask`)."""
+        h = self._h.setdefault(path, hashlib.sha256())
+        for r in range(len(rows)):
+            for j in np.flatnonzero(mask[r]).tolist():
+                h.update(j.to_bytes(8, "little"))
+                h.update(np.ascontiguousarray(rows[r, j * width:(j + 1) * width]).tobytes())
+            h.update(self.ROW)
+
     def hexdigests(self) -> dict:
         return {path: h.hexdigest() for path, h in self._h.items()}
 
     @classmethod
-    def of_file(cls, f, counts: dict) -> "DataDigest":
-        """The digest of the first ``counts[path]`` rows of each dataset ``f[path]``."""
-        d = cls()
+    def of_file(cls, f, counts: dict, blocks: bool = False) -> "DataDigest":
+        """The digest of the first ``counts[path]`` rows of each dataset ``f[path]``; with
+        ``blocks``, column-block datasets hashed by blocks (:meth:`update_blocks`)."""
+        from .rest_blocks import block_mask, sparse_width
+
+        d = cls(blocks)
         for path, k in counts.items():
             ds = f[path]
             d._h[path] = hashlib.sha256()
-            for i in range(0, k, ROWS):
-                d.update(path, ds[i:min(k, i + ROWS)], ds.dtype)
+            width = sparse_width(ds) if blocks else None
+            row_bytes = ds.dtype.itemsize * int(np.prod(ds.shape[1:], dtype=np.int64))
+            step = max(1, min(ROWS, READ_BYTES // max(1, row_bytes)))
+            for i in range(0, k, step):
+                rows = ds[i:min(k, i + step)]
+                if width is None:
+                    d.update(path, rows, ds.dtype)
+                else:
+                    d.update_blocks(path, rows, width, block_mask(rows, width, ds.fillvalue))
         return d
 
 
@@ -80,8 +116,8 @@ def split_state(state: dict):
 
 
 def save(f, state: dict, *, backend: str, scene_toml: str, frames: int, events: int,
-         data: dict):
-    """Replace ``f``'s checkpoint by ``state`` (``data``: the frame datasets' digests)."""
+         data: DataDigest):
+    """Replace ``f``'s checkpoint by ``state`` (``data``: the frame datasets' digest)."""
     scalars, arrays = split_state(state)
     if GROUP in f:
         del f[GROUP]
@@ -90,7 +126,9 @@ def save(f, state: dict, *, backend: str, scene_toml: str, frames: int, events: 
         g.create_dataset(k, data=a)
     meta = {"backend": backend, "scene_sha256": scene_digest(scene_toml), "frames": int(frames),
             "events": int(events), "scalars": scalars, "arrays": sorted(arrays),
-            "state_sha256": state_digest(scalars, arrays), "data_sha256": data}
+            "state_sha256": state_digest(scalars, arrays), "data_sha256": data.hexdigests()}
+    if data.blocks:
+        meta["data_digest"] = BLOCKS
     g.attrs["meta"] = json.dumps(meta)
 
 
@@ -139,7 +177,7 @@ def load(path, *, backend: str, scene_toml: str, counts) -> tuple[dict, dict, Da
                 if p not in f or f[p].shape[0] < k:
                     raise CheckpointError(f"{path}: {p} holds fewer rows than the checkpoint's "
                                           f"{k} (the file is damaged); it was kept")
-            digest = DataDigest.of_file(f, want)
+            digest = DataDigest.of_file(f, want, blocks=meta.get("data_digest") == BLOCKS)
             stored = meta["data_sha256"]  # a dataset never appended to has the empty digest
             bad = sorted(p for p, h in digest.hexdigests().items() if stored.get(p, EMPTY) != h)
             if bad:

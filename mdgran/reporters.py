@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from . import checkpoint
+from .rest_blocks import BLOCK, block_mask, column_runs, lazy_zeros, sparse_width
 from .storage import OutputLock, StorageError, abandon, reason
 from .run_record import LEDGER_NAMES, Run, ledger_terms
 
@@ -71,14 +72,17 @@ CONTACT_DETAIL = ("compression", "force")
 
 def chunk_shape(shape: tuple, itemsize: int, target: int = CHUNK_BYTES) -> tuple:
     """HDF5 chunk of a series whose frames have ``shape`` (e.g. ``(n,)`` or ``(n, 3)``) of
-    ``itemsize``-byte values: about ``target`` bytes, as whole frames (at most 1024 of them)
-    when a frame is smaller than ``target``, else one frame split along its first axis (the
-    beads or contacts): for n = 1e6 doubles, chunks of (1, 262144) = 2 MiB instead of one 8 MB
-    frame."""
+    ``itemsize``-byte values.  A frame of more than :data:`~mdgran.rest_blocks.BLOCK` values
+    (a long chain's per-bead or per-contact series): one frame by ``BLOCK`` columns, the grain
+    at which the writer leaves out blocks at rest (:mod:`mdgran.rest_blocks`).  Otherwise
+    about ``target`` bytes: whole frames (at most 1024 of them) when a frame is smaller than
+    ``target``, else one frame split along its first axis."""
     shape = tuple(int(d) for d in shape)
     size = int(np.prod(shape, dtype=np.int64))
     if size == 0:
         return (1024,) + shape
+    if len(shape) == 1 and shape[0] > BLOCK:
+        return (1, BLOCK)
     frame = itemsize * size
     if frame <= target:
         return (max(1, min(1024, target // frame)),) + shape
@@ -420,8 +424,9 @@ class H5MDWriter:
                                 "bead i-1 and bead i (beads 0, n+1: walls), as in /events")
         for name in self._contact_names():
             dtype, unit, doc = CONTACT_SERIES[name]
+            fill = int(model.gap <= 0) if name == "closed" else 0  # the initial state
             series = self._make_series(g, name, (len(g.attrs["contact"]),), dtype,
-                                       filters=self.filters)
+                                       filters=self.filters, fill=fill)
             if unit:
                 series["value"].attrs["unit"] = unit
             series["value"].attrs["description"] = doc
@@ -438,9 +443,11 @@ class H5MDWriter:
         ev.attrs["kind"] = "1 = close (snap-to-contact), 0 = open (snap-off)"
         ev.attrs["contact"] = "contact i joins bead i-1 and bead i (beads 0, n+1: walls)"
 
-    def _make_series(self, parent, name, shape, dtype="f8", filters=None, own_clock=False):
+    def _make_series(self, parent, name, shape, dtype="f8", filters=None, own_clock=False,
+                     fill=0):
         """A H5MD time series ``name`` with frames of ``shape``: ``step``, ``time`` and a
-        ``value`` chunked by :func:`chunk_shape`, with the h5py ``filters``
+        ``value`` chunked by :func:`chunk_shape` whose fill value (what a chunk never written
+        reads as: :mod:`mdgran.rest_blocks`) is ``fill``, with the h5py ``filters``
         (:data:`COMPRESSION`) if given.  Every series sampled at the frames shares one
         ``step`` and one ``time`` (HDF5 hard links to the first series', as H5MD allows:
         written once per flush); ``own_clock``: datasets of its own (``position``, whose
@@ -458,7 +465,7 @@ class H5MDWriter:
             g["step"], g["time"] = clock["step"], clock["time"]
         value = g.create_dataset("value", (0,) + shape, maxshape=(None,) + shape, dtype=dtype,
                                  chunks=chunk_shape(shape, np.dtype(dtype).itemsize),
-                                 **(filters or {}))
+                                 fillvalue=fill, **(filters or {}))
         return {**clock, "value": value}
 
     def _contact_names(self, obs=None) -> list:
@@ -528,7 +535,8 @@ class H5MDWriter:
         x, v = block.x, block.v
         if self.stride != 1:  # copies of the stored beads (a view would keep all of them)
             x, v = x[:, self._beads], v[:, self._beads]
-        self._buf.append((block.step, block.time, x, v, block.ledger(), per_contact))
+        self._buf.append((block.step, block.time, x, v, block.ledger(), per_contact,
+                          getattr(block, "moved", None)))
         self._buffered += len(block)
         self._events.extend(block.events)
         self._last_step = int(block.step[-1])
@@ -546,30 +554,92 @@ class H5MDWriter:
         self._flush()
         checkpoint.save(self.f, state, backend=self.backend_name,
                         scene_toml=self.scene.to_toml(), frames=self._frames,
-                        events=int(self._ev["time"].shape[0]), data=self._digest.hexdigests())
+                        events=int(self._ev["time"].shape[0]), data=self._digest)
         self.f.flush()
         self._last_checkpoint = _time.perf_counter()
 
-    def _append(self, path, series, steps, times, values):
+    def _append(self, path, series, steps, times, values, within=None):
         """Append rows to ``series``; a ``step`` or ``time`` shared with a series appended
-        before in this flush (:meth:`_make_series`) already has them."""
+        before in this flush (:meth:`_make_series`) already has them.  A ``value`` stored by
+        column blocks gets only its blocks that differ from the fill value
+        (:mod:`mdgran.rest_blocks`), looked for in its columns ``within = (c0, c1)`` if given
+        (the others hold the fill value: :meth:`_moved_columns`)."""
         k0 = series["value"].shape[0]
         k1 = k0 + len(steps)
         for key, data in (("step", steps), ("time", times), ("value", values)):
             ds = series[key]
-            if ds.shape[0] != k1:
-                ds.resize(k1, axis=0)
-                ds[k0:k1] = data
+            width = sparse_width(ds) if key == "value" else None
+            if width is None:
+                if ds.shape[0] != k1:
+                    ds.resize(k1, axis=0)
+                    ds[k0:k1] = data
+                if self._digest is not None:
+                    self._digest.update(f"{path}/{key}", data, ds.dtype)
+                continue
+            ds.resize(k1, axis=0)
+            data = np.asarray(data, dtype=ds.dtype)
+            mask = self._block_mask(data, width, ds.fillvalue, within)
+            for c0, c1 in column_runs(mask.any(axis=0), width, data.shape[1]):
+                ds[k0:k1, c0:c1] = data[:, c0:c1]
             if self._digest is not None:
-                self._digest.update(f"{path}/{key}", data, ds.dtype)
+                if self._digest.blocks:
+                    self._digest.update_blocks(f"{path}/{key}", data, width, mask)
+                else:
+                    self._digest.update(f"{path}/{key}", data, ds.dtype)
 
-    def _flush_beads(self, steps, times):
+    @staticmethod
+    def _block_mask(data, width, fill, within):
+        """:func:`~mdgran.rest_blocks.block_mask` of ``data``, looked for in the blocks that
+        meet its columns ``within`` only (None: all)."""
+        if within is None:
+            return block_mask(data, width, fill)
+        nb = -(-data.shape[1] // width)
+        mask = np.zeros((len(data), nb), dtype=bool)
+        j0, j1 = within[0] // width, -(-within[1] // width)
+        if j0 < j1:
+            mask[:, j0:j1] = block_mask(data[:, j0 * width:j1 * width], width, fill)
+        return mask
+
+    @staticmethod
+    def _gather(parts, within):
+        """The rows of ``parts`` together; with ``within = (c0, c1)`` (the columns outside
+        hold zeros: :meth:`_moved_columns`) only those columns are copied, into zeros that
+        cost nothing until written."""
+        if within is None:
+            return np.concatenate(parts)
+        out = lazy_zeros((sum(len(p) for p in parts), parts[0].shape[1]))
+        k = 0
+        for p in parts:
+            out[k:k + len(p), within[0]:within[1]] = p[:, within[0]:within[1]]
+            k += len(p)
+        return out
+
+    def _moved_columns(self):
+        """``(beads, contacts)``: the stored columns of the per-bead and per-contact series
+        outside which the buffered frames hold the fill values (their beads at rest at 0 and
+        contacts in the initial state: :attr:`~mdgran.backends.base.Frames.moved`), or
+        ``(None, None)``."""
+        ranges = [b[6] for b in self._buf]
+        if any(r is None for r in ranges):
+            return None, None
+        lo, hi = min(r[0] for r in ranges), max(r[1] for r in ranges)
+        if lo >= hi:
+            return (0, 0), (0, 0)
+        from .chain import touching_contacts
+
+        model = self._contact_model()
+        c0, c1 = touching_contacts(model.n, model.walls, lo, hi)
+        k = self.stride or 1
+        return (-(-lo // k), -(-hi // k)), (-(-c0 // k), -(-c1 // k))
+
+    def _flush_beads(self, steps, times, within=None):
         """Append the buffered frames' per-bead series (the stored beads only)."""
         chain = "particles/chain"
-        x = np.concatenate([b[2] for b in self._buf])
-        v = np.concatenate([b[3] for b in self._buf])
-        self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x)
-        self._append(f"{chain}/velocity", self._series["velocity"], steps, times, v)
+        x = self._gather([b[2] for b in self._buf], within)
+        v = self._gather([b[3] for b in self._buf], within)
+        self._append(f"{chain}/displacement", self._series["displacement"], steps, times, x,
+                     within)
+        self._append(f"{chain}/velocity", self._series["velocity"], steps, times, v, within)
         if self.positions:
             pos = np.zeros(x.shape + (3,))
             pos[..., 0] = self._rest + x * self._pos_scale
@@ -581,8 +651,9 @@ class H5MDWriter:
             buf = self._buf
             steps = np.concatenate([b[0] for b in buf]).astype(np.int64, copy=False)
             times = np.concatenate([b[1] for b in buf]).astype(float, copy=False)
+            beads, contacts = self._moved_columns()
             if "displacement" in self._series:  # not with output.bead_stride = 0
-                self._flush_beads(steps, times)
+                self._flush_beads(steps, times, beads)
             for name in self.terms:
                 self._append(f"observables/{name}", self._series[name], steps, times,
                              np.concatenate([b[4][name] for b in buf]))
@@ -591,7 +662,8 @@ class H5MDWriter:
                 if key in self._series:
                     rows = np.concatenate([b[5][name] for b in buf])
                     values = rows.astype(np.int8)[:, self._cols] if name == "closed" else rows
-                    self._append(f"observables/{key}", self._series[key], steps, times, values)
+                    self._append(f"observables/{key}", self._series[key], steps, times, values,
+                                 contacts if name == "closed" else None)
             self._frames += self._buffered
             self._buf, self._buffered = [], 0
         if self._events:

@@ -127,6 +127,11 @@ BASE_KINDS = ("none", "displacement", "acceleration")
 _MAT = "required in a [material]"
 _SI_LIST = "a number or a list of chain.n numbers"
 
+#: output.positions defaults to true up to this many stored beads (240 kB a frame), false above:
+#: every position is written, where a long chain's displacement and velocity cost the beads
+#: that moved (mdgran.rest_blocks)
+POSITIONS_AUTO_BEADS = 10000
+
 #: section -> key -> :class:`Key`.  The one source of the keys, their defaults, ranges and units
 #: (``docs/scene_keys.md`` is generated from it).
 SCHEMA = {
@@ -196,8 +201,12 @@ SCHEMA = {
                        "depend on it); 0: every core the process may use"),
     },
     "output": {
-        "positions": Key(True, "bool", "true or false (store H5MD position; false for long "
-                         "chains)", "", "store the H5MD position element"),
+        "positions": Key(None, "bool?", "true or false (store H5MD position)", "",
+                         "store the H5MD position element (24 bytes per bead and frame, "
+                         f"every value written); default: true up to {POSITIONS_AUTO_BEADS} "
+                         "stored beads, false above (a long chain's displacement and velocity "
+                         "cost the beads that moved, docs/output.md)",
+                         shown=f"true up to {POSITIONS_AUTO_BEADS} stored beads"),
         "contacts": Key(False, "bool", "true or false (store per-contact compression and "
                         "force; 16 bytes per contact per frame)", "",
                         "also store /observables/contacts/{compression,force} per frame "
@@ -371,7 +380,7 @@ def _check_value(key: str, value, kind, allowed: str):
         if not value:
             raise SceneError(key, f"must be {allowed}, not an empty list")
         return [_check_value(key, v, kind[5:].rstrip("?"), allowed) for v in value]
-    if kind == "bool":
+    if kind.rstrip("?") == "bool":
         if not isinstance(value, bool):
             raise SceneError(key, f"must be {allowed}, not {value!r}")
         return value
@@ -681,6 +690,10 @@ def _resolve(raw: dict):
     _check_beads(data, raw)
     _derive_beads(data, raw, scales, sources)
     _check_drive(data)
+    out = data["output"]
+    if out["positions"] is None:
+        stored = -(-ch["n"] // out["bead_stride"]) if out["bead_stride"] else 0
+        out["positions"] = stored <= POSITIONS_AUTO_BEADS
     if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
         raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
                          "per-bead or per-contact series); give a stride >= 1 to store them")
@@ -1005,7 +1018,7 @@ def dump_toml(data: dict) -> str:
 def _kind_name(kind) -> str:
     if isinstance(kind, tuple):
         return "string"
-    if kind == "bool":
+    if kind.rstrip("?") == "bool":
         return "boolean"
     if kind == "str":
         return "string"

@@ -153,8 +153,9 @@ def test_resumed_decimated_compressed_run_equals_uninterrupted(files, tmp_path):
 
 
 def test_chunks_and_buffer_by_bytes():
-    # 1e6 doubles per frame: one frame split along the beads into 2 MiB chunks
-    assert chunk_shape((10**6,), 8) == (1, 262144)
+    # a long series (more than BLOCK = 4096 values a frame): one frame by 4096 columns, the
+    # grain at which blocks at rest are left out (mdgran.rest_blocks)
+    assert chunk_shape((10**6,), 8) == chunk_shape((4097,), 1) == (1, 4096)
     assert chunk_shape((10**6, 3), 8) == (1, 87381, 3)
     assert chunk_shape((20,), 8) == (1024, 20)  # small frames: 1024 of them per chunk
     assert chunk_shape((1000,), 8) == (262, 1000)

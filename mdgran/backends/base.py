@@ -92,14 +92,23 @@ class Frames:
     (no excitation: 0); ``events``: the :class:`Event` s of the F frames in order, the first
     ``event_ends[k]`` of them in frames ``0 .. k``.  The arrays are the block's own: nobody
     changes them after.  :meth:`ledger` is computed once, for every frame together
-    (:meth:`~mdgran.chain.ChainModel.ledger_block`: bitwise each frame's own ledger)."""
+    (:meth:`~mdgran.chain.ChainModel.ledger_block`: bitwise each frame's own ledger, or, with
+    ``moved``, equal to it to round-off).
+
+    ``moved``: None, or the 0-based bead range ``(lo, hi)`` (``lo .. hi - 1``) outside which,
+    in every frame of the block, every bead is at rest at ``x = v = +0.0`` and every contact
+    that joins two such beads (or a bead and a wall) is in its initial state (a long chain
+    struck at one end: :mod:`mdgran.rest_blocks`).  The ledger, the writer and the checks
+    then cost the beads in it, not the chain."""
 
     __slots__ = ("model", "step", "time", "x", "v", "closed", "dissipated_viscous",
                  "dissipated_hysteresis", "external_work", "events", "event_ends",
-                 "_ledger", "_rows")
+                 "moved", "_ledger", "_rows")
 
     def __init__(self, model, step, time, x, v, closed, dissipated_viscous,
-                 dissipated_hysteresis, external_work, events, event_ends, ledger=None):
+                 dissipated_hysteresis, external_work, events, event_ends, ledger=None,
+                 moved=None):
+        self.moved = moved
         self.model = model
         self.step, self.time, self.x, self.v, self.closed = step, time, x, v, closed
         self.dissipated_viscous = dissipated_viscous
@@ -126,7 +135,7 @@ class Frames:
             t = self.time if self.external_work is not None else None
             self._ledger = self.model.ledger_block(
                 self.x, self.v, self.closed, self.dissipated_viscous,
-                self.dissipated_hysteresis, self.external_work, t)
+                self.dissipated_hysteresis, self.external_work, t, moved=self.moved)
         return self._ledger
 
     def ledger_row(self, k: int) -> dict:

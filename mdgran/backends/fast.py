@@ -90,6 +90,16 @@ def usable_threads(threads: int) -> int:
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
 
 
+def rest_displacement(x: np.ndarray):
+    """What the beads at rest of a run starting from displacements ``x`` hold while they stay
+    at rest (they are not stepped: :func:`~mdgran.backends.fast_kernel.advance_front`): None
+    when every ``x`` is ``+0.0`` (then frames start as zeros and cost the beads that move),
+    else a copy of ``x`` (unlike beads between walls start from their equilibrium)."""
+    if not np.asarray(x).view(np.uint64).any():
+        return None
+    return np.array(x, dtype=float)
+
+
 @lru_cache(maxsize=8)
 def contact_table(law, points: int | None, delta_max: float) -> tuple:
     """``(ContactTable, its error())`` of ``law`` on ``points`` nodes (ContactTable's default
@@ -316,14 +326,25 @@ class FastBackend(Backend):
         return Frames.of(frame, self.model)
 
     @staticmethod
-    def _check_finite(x, v, times):
-        """IntegrationError at the first of the states ``x[k], v[k]`` (time ``times[k]``) with
-        a non-finite element."""
+    def _check_finite(x, v, times, first=0):
+        """IntegrationError at the first of the states ``x[k], v[k]`` (time ``times[k]``; the
+        beads from 0-based ``first`` on) with a non-finite element."""
         if np.isfinite(x).all() and np.isfinite(v).all():
             return
         bad = ~(np.isfinite(x) & np.isfinite(v))
         k, bead = np.argwhere(bad)[0]
-        raise IntegrationError(f"non-finite state at t = {times[k]:.12g}, bead {bead + 1}")
+        raise IntegrationError(f"non-finite state at t = {times[k]:.12g}, bead "
+                               f"{first + bead + 1}")
+
+    def _moved(self, counts):
+        """:attr:`~mdgran.backends.base.Frames.moved` of a block whose rows have the kernel's
+        ``counts``: the beads of the activity front (its ``front_lo .. front_hi`` columns) of
+        any of them, when the beads at rest sit at ``x = 0``; None while the front is not
+        known, or with beads at rest elsewhere."""
+        if self._rest_x is not None or not len(counts) or (counts[:, 5] < 0).any():
+            return None
+        lo, hi = int(counts[:, 5].min()), int(counts[:, 6].max()) + 1
+        return (lo, hi) if lo < hi else (0, 0)
 
     # ---- main loop ------------------------------------------------------------------------
     def frames(self, resume: dict | None = None):
@@ -348,6 +369,7 @@ class FastBackend(Backend):
             x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
             now = self._current()
             now.x[:], now.v[:], self.closed[:] = x, v, closed
+            self._rest_x = rest_displacement(x)
             fk.settle_all(self.flags, self.params, 0.0, now, self.ks)
             cnt["power"] = fk.init_acc(self.flags, self.params, now, self.ks)
             self._check()
@@ -360,6 +382,7 @@ class FastBackend(Backend):
             y = np.asarray(resume["y"], dtype=float)
             now = self._current()
             now.x[:], now.v[:], now.a[:] = y[:n], y[n:2 * n], y[2 * n:3 * n]
+            self._rest_x = rest_displacement(now.x)
             cnt["d_viscous"], cnt["power"] = y[3 * n], y[3 * n + 1]
             if len(y) > 3 * n + 2:  # with excitations
                 cnt["work"], cnt["ext_power"] = y[3 * n + 2], y[3 * n + 3]
@@ -389,7 +412,7 @@ class FastBackend(Backend):
         early) into a fresh :class:`~mdgran.backends.fast_kernel.FrameBlock`; ``(block,
         frames done, seconds)``.  It may run on the backend's own thread (:meth:`_blocks_from`):
         it touches the kernel's buffers, counters and log and the new block alone."""
-        block = fk.new_block(nframes, self.model.n, self.model.n_contacts)
+        block = fk.new_block(nframes, self.model.n, self.model.n_contacts, self._rest_x)
         k0 = _time.perf_counter()
         if self.flags.threaded:
             numba.set_num_threads(self.threads)
@@ -432,8 +455,11 @@ class FastBackend(Backend):
                 stats["kernel_s"] += seconds
                 times = out_times[i:i + done]
                 error = None  # a non-finite state: the frames before it, then the error
+                moved = self._moved(block.counts[:done])
+                cols = slice(None) if moved is None else slice(*moved)
                 try:
-                    self._check_finite(block.x[:done], block.v[:done], times)
+                    self._check_finite(block.x[:done, cols], block.v[:done, cols], times,
+                                       cols.start or 0)
                 except IntegrationError as exc:
                     error = exc
                     done = next(k for k in range(done) if not np.all(
@@ -460,7 +486,7 @@ class FastBackend(Backend):
                     frames = Frames(self.model, np.arange(first, i), times[:done],
                                     block.x[:done], block.v[:done], block.closed[:done],
                                     sums[:, 0], sums[:, 1], sums[:, 3] if driven else None,
-                                    evs, ends)
+                                    evs, ends, moved=moved)
                     stats["steps"] = (i - 1) * spf
                     stats["event_substeps"] = int(block.counts[done - 1, 1])
                     stats["event_windows"] = int(block.counts[done - 1, 2])

@@ -327,9 +327,17 @@ class FrameBlock(NamedTuple):
     counts: np.ndarray  # [K, 7] int64
 
 
-def new_block(frames: int, n: int, n_contacts: int) -> FrameBlock:
-    """An uninitialised :class:`FrameBlock` of ``frames`` rows."""
-    return FrameBlock(np.empty((frames, n)), np.empty((frames, n)), np.empty((frames, n)),
+def new_block(frames: int, n: int, n_contacts: int, rest_x=None) -> FrameBlock:
+    """A :class:`FrameBlock` of ``frames`` rows whose beads are at rest (the loop fills in the
+    others): ``x = rest_x`` (default 0), ``v = a = 0``.  Zeros cost nothing until written
+    (:func:`mdgran.rest_blocks.lazy_zeros`): a long chain's frames cost the beads that
+    moved."""
+    from ..rest_blocks import lazy_zeros
+
+    x = lazy_zeros((frames, n))
+    if rest_x is not None:
+        x[:] = rest_x
+    return FrameBlock(x, lazy_zeros((frames, n)), lazy_zeros((frames, n)),
                       np.empty((frames, n_contacts), dtype=np.bool_), np.empty((frames, 5)),
                       np.empty((frames, 7), dtype=np.int64))
 
@@ -1704,7 +1712,9 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
 def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
                    run_segments):
     """Frames ``first .. first + nframes - 1`` (frame ``i`` ends at step ``i * spf``), each
-    state at a frame's end copied into ``block`` row ``i - first``; returns the frames done
+    state at a frame's end copied into ``block`` row ``i - first`` (the beads of the activity
+    front only, once it is known: ``block`` holds the beads at rest already, :func:`new_block`;
+    every contact's state); returns the frames done
     (fewer on an error or a half-full event log: ``counters.status``; the steps of the
     unfinished frame done so far are kept, and a next call continues them)."""
     counters = ks.counters[0]
@@ -1714,7 +1724,10 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         if counters.status != OK:
             return k
         c = counters.current
-        for i in range(buffers.x.shape[1]):  # loops, not slices: no temporary arrays
+        lo, hi = 0, buffers.x.shape[1] - 1  # the beads not at rest: the front once known
+        if counters.front_lo >= 0:
+            lo, hi = counters.front_lo, counters.front_hi
+        for i in range(lo, hi + 1):  # loops, not slices: no temporary arrays
             block.x[k, i] = buffers.x[c, i]
             block.v[k, i] = buffers.v[c, i]
             block.a[k, i] = buffers.a[c, i]
