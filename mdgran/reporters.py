@@ -688,6 +688,10 @@ class H5MDWriter:
             if status == "interrupted":
                 if self.checkpoint_every is not None:  # keep NAME.partial to resume from
                     self._guard(self.checkpoint)
+                    if "checkpoint" not in self.f:  # before the first frame: nothing to keep
+                        self.f.close()
+                        self.tmp.unlink(missing_ok=True)
+                        return
                     self._guard(self.f.close)
                 elif self.tmp.name.endswith(".partial"):  # resumed, no new checkpoints: its own
                     self._guard(self.f.close)  # (the frames after it are dropped on resume)

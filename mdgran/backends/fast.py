@@ -300,11 +300,13 @@ class FastBackend(Backend):
         raise IntegrationError(f"more than {EVENT_BUFFER // 2} events in one step at "
                                f"t = {t:.12g}, contact {num}")
 
-    def checkpoint_state(self) -> dict:
+    def checkpoint_state(self) -> dict | None:
         """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
         ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
         so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
-        ``closed``, ``d_hyst``, ``i_out``."""
+        ``closed``, ``d_hyst``, ``i_out``; None before the first frame."""
+        if getattr(self, "_last", None) is None:
+            return None
         block, a, sums, k = self._last  # a, sums: the kernel's rows of the frame's block
         ledger = [block.dissipated_viscous[k], sums[k, 2]]
         if self.model.drive is not None:

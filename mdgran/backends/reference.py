@@ -286,10 +286,12 @@ class ReferenceBackend(Backend):
             self._switch(t, y, ks, events)
 
     # ---- main loop -----------------------------------------------------------------------
-    def checkpoint_state(self) -> dict:
+    def checkpoint_state(self) -> dict | None:
         """Everything needed to continue exactly from the last yielded frame (the solver
-        restarts at every output time, so this is the whole hidden state)."""
-        return dict(self._snapshot)
+        restarts at every output time, so this is the whole hidden state); None before the
+        first frame."""
+        snapshot = getattr(self, "_snapshot", None)
+        return None if snapshot is None else dict(snapshot)
 
     def frames(self, resume: dict | None = None):
         """Integrate the scene; yield a Frame at every output time.
