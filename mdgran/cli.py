@@ -322,14 +322,15 @@ def cmd_report(args) -> int:
     if args.sweep_dir is not None and not (Path(args.sweep_dir) / "sweep.json").exists():
         raise UsageError(f"--sweep-dir: {args.sweep_dir} holds no sweep.json (a folder written "
                          "by mdgran sweep)")
-    from .study import BEYOND
+    from .study import BEYOND, BEYOND_STUDIES
 
+    known = (*BEYOND, *BEYOND_STUDIES)
     beyond = [b.strip() for b in (args.beyond or "").split(",") if b.strip()]
     if args.beyond == "all":
-        beyond = list(BEYOND)
-    bad = [b for b in beyond if b not in BEYOND]
+        beyond = list(known)
+    bad = [b for b in beyond if b not in known]
     if bad:
-        raise UsageError(f"--beyond: {bad[0]!r} is not one of {', '.join(BEYOND)} (or all)")
+        raise UsageError(f"--beyond: {bad[0]!r} is not one of {', '.join(known)} (or all)")
     make_report(args.dir, small=args.small, workers=args.workers, backend=args.backend,
                 sweep_dir=args.sweep_dir, progress=not args.quiet, beyond=beyond)
     print(f"report in {args.dir}/report.md")
@@ -418,7 +419,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use this finished mdgran sweep folder instead of DIR/sweep")
     s.add_argument("--beyond", default=None, metavar="SWEEPS",
                    help="also run and analyse these studies beyond the paper: comma-separated "
-                   "from chain-100, chain-1000, lambda-range, or all")
+                   "from chain-100, chain-1000, lambda-range, long-chain (the primary pulse "
+                   "in chains of up to 1e5 beads, fast backend), or all")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_report)
     return p

@@ -42,6 +42,9 @@ FLAGSHIP = ("micro-star", "macro-hertz")
 BEYOND = {"chain-100": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False),
           "chain-1000": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False),
           "lambda-range": ("contact.lambda", "Maugis parameter lambda", True)}
+#: beyond the paper, studies that are no sweep: the primary pulse in long chains
+#: (mdgran.long_chain, on the fast backend)
+BEYOND_STUDIES = ("long-chain",)
 
 
 def _atomic_write(path: Path, text: str):
@@ -174,6 +177,8 @@ def status_markdown(nb: dict) -> list:
     bad_runs = {k: v for k, v in st["runs"].items() if v != "complete"}
     bad = {"the sweep": st["sweep_not_complete"],
            **{f"beyond/{k}": b["not_complete"] for k, b in nb.get("beyond", {}).items()}}
+    if "long_chain" in nb:
+        bad["beyond/long-chain"] = nb["long_chain"]["not_complete"]
     L = ["## Run status", ""]
     if not bad_runs and not any(bad.values()):
         return L + ["Every run and sweep case is complete: its energy-ledger error is within its "
@@ -284,7 +289,9 @@ def make_report(out, small: bool = False, workers: int | None = None,
                                   *REALIZATION_SHUFFLES[bool(small)]))
         numbers["realizations"] = rz
     numbers["beyond"] = {}
-    for name in beyond:
+    if "long-chain" in beyond:
+        numbers["long_chain"] = _long_chain(figs / "beyond-long-chain.png", small, say)
+    for name in (b for b in beyond if b not in BEYOND_STUDIES):
         bdir = out / "beyond" / name
         run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
                   progress=progress, backend=_folder_backend(bdir, backend))
@@ -305,6 +312,50 @@ def make_report(out, small: bool = False, workers: int | None = None,
     _atomic_write(out / "report.md", markdown(numbers, cases, small))
     say(f"report: {out / 'report.md'}")
     return numbers
+
+
+def _long_chain(figure, small: bool, say) -> dict:
+    """:func:`mdgran.long_chain.long_chain_study` (smaller and shorter with ``small``), its
+    runs that are not complete listed as the sweeps' are (``not_complete``)."""
+    from . import long_chain as lc
+
+    if small:
+        nb = lc.long_chain_study(figure, sizes=(100, 1000, 3000), velocities=(12.0, 100.0),
+                                 lambdas=(0.64, 5.0), duration=20.0, progress=say)
+    else:
+        nb = lc.long_chain_study(figure, progress=say)
+    nb["not_complete"] = [{"index": k, "params": {key: r[key] for key in ("n", "v0", "lambda")},
+                           "status": r["status"]}
+                          for k, r in enumerate(nb["runs"]) if r["status"] != "complete"]
+    return nb
+
+
+def long_chain_markdown(lc: dict) -> list:
+    """report.md's section on the primary pulse in long chains."""
+    L = ["", "## The primary pulse in long chains", "",
+         f"micro-star struck at bead 1 (fast backend, t = {lc['duration']:g}), on chains of "
+         "several lengths and, on the longest, for several impulse velocities and Maugis "
+         "parameters. Reach: the farthest bead whose largest speed is at least 1e-3 v0; speed "
+         "of the pulse from the times of the beads' largest speeds; energy left: the "
+         "mechanical energy on the chain at the end (contacts at rest hold 0; a contact "
+         "settled in its adhesive well holds less); bead-steps: the share of N x steps the "
+         "activity front stepped.", "",
+         "| varies | beads | v0 | lambda | reach (beads) | speed (beads per 1/q) | open "
+         "contacts | snap-offs | energy left / E_imp | bead-steps | status | ledger error |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in lc["runs"]:
+        share = (r["bead_steps"] / (r["n"] * r["steps"])
+                 if r["bead_steps"] and r["steps"] else None)
+        L.append(f"| {r['varies']} | {r['n']} | {r['v0']:g} | {_fmt(r['lambda'])} | "
+                 f"{r['reach']} | {_fmt(r['speed_beads_per_time'])} | {r['open_contacts']} | "
+                 f"{r['snapoffs_total']} | {r['energy_left_total'] / (0.5 * r['v0'] ** 2):.3g} | "
+                 f"{_fmt(share)} | {r['status']} | {_fmt(r['max_ledger_error'])} |")
+    conv = ", ".join(f"N = {n}: {d:.3g}" for n, d in lc["converged_peak_v"].items())
+    L += ["", f"Largest difference of a chain's per-bead largest speed from the longest "
+          f"chain's (p q): {conv} (0 exactly once the chain is longer than the pulse's "
+          "reach: its beads move bitwise alike).", "",
+          "![long chains](figures/beyond-long-chain.png)"]
+    return L
 
 
 def _json(o):
@@ -813,4 +864,6 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
                      f"{_fmt(b['max_ledger_error'])} |")
         L.append("")
         L += [f"![{name}](figures/beyond-{name}.png)" for name in nb["beyond"]]
+    if "long_chain" in nb:
+        L += long_chain_markdown(nb["long_chain"])
     return "\n".join(L) + "\n"

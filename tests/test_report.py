@@ -29,7 +29,7 @@ def test_report_small(tmp_path):
     from mdgran.study import make_report
 
     nb = make_report(out, small=True, workers=2, duration=150.0, progress=False,
-                     beyond=("lambda-range",))
+                     beyond=("lambda-range", "long-chain"))
     text = (out / "report.md").read_text()
     for f in ("fig2", "fig3", "fig4", "fig5", "fig6", "figB1", "figB2", "figB3", "fig7"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 10_000, f
@@ -37,6 +37,14 @@ def test_report_small(tmp_path):
     assert "## Beyond the paper" in text and (out / "figures" / "beyond-lambda-range.png").exists()
     data = json.loads((out / "report.json").read_text())
     assert data["beyond"]["lambda-range"]["cases"] == 2
+    # the primary pulse in long chains: 100, 1000 and 3000 beads to t = 20 (the pulse reaches
+    # ~60 beads: the three chains' beads move alike, bitwise), a figure and a section
+    lc = data["long_chain"]
+    assert "## The primary pulse in long chains" in text
+    assert (out / "figures" / "beyond-long-chain.png").stat().st_size > 10_000
+    assert lc["converged_peak_v"] == {"100": 0.0, "1000": 0.0, "3000": 0.0}
+    assert all(r["status"] == "complete" and 0 < r["reach"] < 100 for r in lc["runs"])
+    assert not lc["not_complete"]
     assert data["sweep"]["cases"] == 4 and data["sweep"]["max_ledger_error"] < 1e-8
     # during re-clustering micro-star's kinetic energy is below macro-hertz's (the paper's
     # Fig. 2c; measured 0.12 vs 0.205 of T(0) at 3 T_c, running mean over one T_c)

@@ -1,0 +1,55 @@
+"""The primary pulse in long chains (mdgran.long_chain): the tracker against the frames it saw,
+the beads' energies against the ledger, and the measures against chain length."""
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from conftest import make_scene
+
+from mdgran.chain import model_from_scene
+from mdgran.long_chain import PulseTracker, bead_energies, pulse_profile, run_pulse
+from mdgran.simulation import run
+
+
+@settings(max_examples=8, deadline=None)
+@given(n=st.integers(20, 400), free=st.booleans(), gap=st.sampled_from([0.0, 0.002]),
+       law=st.sampled_from(["schwarz", "dmt", "hertz"]), v0=st.sampled_from([5.0, 40.0]))
+def test_tracker_and_bead_energies(n, free, gap, law, v0):
+    """The tracker's largest speeds and their times are those of the frames kept in memory;
+    the beads' energies at the end add up to the ledger's kinetic + contact + substrate
+    energy (linear and cubic substrate), for fixed and free chains, with and without a gap,
+    three laws."""
+    scene = make_scene(chain={"n": n, "boundary": "free" if free else "fixed",
+                              "initial_gap": gap},
+                       contact={"law": law}, substrate={"k1": 0.3, "k3": 0.5}, impulse={"velocity": v0},
+                       run={"duration": 5.0, "output_interval": 0.25, "dt": 0.0025})
+    tracker = PulseTracker(n)
+    res = run(scene, "fast", reporters=[tracker], threads=1)
+    tr = res.trajectory
+    speed = np.abs(tr.v)
+    assert np.array_equal(tracker.peak_v, speed.max(axis=0))
+    moved = speed.max(axis=0) > 0
+    first = tr.time[np.argmax(speed, axis=0)]
+    assert np.array_equal(tracker.peak_t[moved], first[moved])
+    assert np.isnan(tracker.peak_t[~moved]).all()
+    model = model_from_scene(scene)
+    e = bead_energies(model, tr.x[-1], tr.v[-1], tr.closed[-1])
+    led = {k: v[-1] for k, v in tr.ledger.items()}
+    mech = led["kinetic_energy"] + led["contact_energy"] + led["substrate_energy"]
+    assert abs(e.sum() - mech) <= 1e-12 * max(1.0, abs(mech), 0.5 * v0 * v0)
+    prof = pulse_profile(tracker, model, v0)
+    assert prof["snapoffs_total"] == int(np.sum(tr.ev_kind == 0))
+    assert prof["open_contacts"] == int((~tr.closed[-1]).sum())
+
+
+def test_measures_do_not_depend_on_length_beyond_the_reach():
+    """micro-star's pulse to t = 20 reaches ~60 beads: chains of 300 and 30,000 beads give the
+    same largest speeds bit for bit, the same reach, speed, open contacts and energy left."""
+    a, ra = run_pulse(300, 12.0, None, 20.0)
+    b, rb = run_pulse(30_000, 12.0, None, 20.0)
+    assert ra.status == rb.status == "complete"
+    assert 10 < a["reach"] < 300 and a["reach"] == b["reach"]
+    assert np.array_equal(a["peak_v"], b["peak_v"][:300]) and not b["peak_v"][300:].any()
+    assert a["speed_beads_per_time"] == b["speed_beads_per_time"] > 0
+    assert a["open_contacts"] == b["open_contacts"]
+    assert np.array_equal(a["energy_left"][:a["reach"]], b["energy_left"][:a["reach"]])
