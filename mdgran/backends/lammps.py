@@ -86,7 +86,7 @@ from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
-                   check_pulse_steps)
+                   check_excitation_steps)
 
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
@@ -202,7 +202,7 @@ class LammpsBackend(Backend):
         if abs(self.steps_per_frame * self.dt - interval) > 1e-9 * interval:
             raise SceneError("run.dt", f"must divide run.output_interval = {interval} "
                              f"(dt = {self.dt})")
-        check_pulse_steps(self.model, self.dt, self.name)
+        check_excitation_steps(self.model, self.dt, self.name)
         self.comm = comm
         m = self.model
         self.law = m.law
