@@ -4,8 +4,10 @@
 // same law, same step-quantized switching, same floating-point operations in the same order,
 // so that the two agree to round-off ("events quantized", the default).  With "events located"
 // the fix integrates the chain itself and locates each contact event inside the step, as
-// mdgran's fast backend does: second order in dt through snap events (section "located events"
-// below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
+// mdgran's fast backend does: the pass steps the whole chain, and each event's window of beads
+// is stepped again alone through its events while the beads next to it move on their
+// parabolas, so a step costs O(N + events) and no event needs a collective call; second order
+// in dt through snap events (sections "located events" and "event windows" below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
 // units (mdgran/units.py): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
@@ -78,8 +80,13 @@
 // the rank owning its left atom (events and dissipation there); the rank owning the right atom
 // repeats the same update on a ghost copy of the state (forward-communicated every step with
 // x0 and a(t)), so both agree; comm_modify vel yes and a ghost cut-off above the largest
-// |x_(k+1) - x_k| of a closed contact are needed.  Sums over ranks are synced at set-up and at
-// the end of every run, and when a global output is asked for (thermo, extract_fix).
+// |x_(k+1) - x_k| of a closed contact are needed.  Located, every rank steps each event window
+// that writes one of its atoms, from the step's start forwarded to the ghosts (x0, state, xs,
+// vs, aprev), identically on every rank: it needs the atoms within WINDOW_MARGIN (3) beads of
+// the window as ghosts, or the run stops with a line saying so (raise comm_modify cutoff);
+// positions, velocities and events are then those of one rank bit for bit.  Sums over ranks
+// are synced at set-up and at the end of every run, and when a global output is asked for
+// (thermo, extract_fix).
 #include "fix_mdgran_chain.h"
 
 #include "atom.h"
@@ -1050,7 +1057,7 @@ void FixMdgranChain::drift(double h)
 }
 
 // The owned atoms' accelerations at the end of a pass of length h (located_pass: contact and
-// kick forces by left atom), which become the next substep's a0 (aprev), and the kick of the
+// kick forces by left atom), which become the next step's a0 (aprev), and the kick of the
 // moving ones, v = v_half + h/2 a_kick (h = 0: v unchanged).  last: the step ends here, and
 // LAMMPS's force array gets the acceleration (mass 1) for its computes and dumps.  One loop
 // over the atoms (a separate kick loop cost ~15% of a step, memory traffic).
@@ -1064,19 +1071,22 @@ void FixMdgranChain::accelerate(double h, int last)
 // and right contacts (fl, fr; fvl, fvr with the mean-force kick), its displacement ui and
 // velocity estimate wi: a = fl - fr - (k1 u + k3 u^3) (mass 1); EXT (unlike beads, substrate
 // damping, excitations): a = (fl - fr [+ F_pulse] - g (k1 y + k3 y^3 + c_s (w - u_b'))) / m
-// with y = u - u_b, at the time of set_drive_time.
+// with y = u - u_b, at the time of set_drive_time.  k1_, k3_: the members k1, k3, which the
+// caller's loop keeps in registers (read through this, a store to a double array may alias
+// them, and they were reloaded at every atom)
 template <bool EXT>
 inline void FixMdgranChain::bead_acc(int i, double fl, double fr, double fvl, double fvr,
-                                     double ui, double wi, double &a, double &av) const
+                                     double ui, double wi, double k1_, double k3_, double &a,
+                                     double &av) const
 {
   a = fl - fr;
   av = fvl - fvr;
-  double sub = k1 * ui + k3 * ui * ui * ui;    // substrate: k1 u + k3 u^3
+  double sub = k1_ * ui + k3_ * ui * ui * ui;    // substrate: k1 u + k3 u^3
   if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
     const tagint t = atom->tag[i];
     if (driven) {    // the substrate on u - u_b, w - u_b'; the pulse on its atom
       const double y = ui - now_ub;
-      sub = k1 * y + k3 * y * y * y;
+      sub = k1_ * y + k3_ * y * y * y;
       wi = wi - now_vb;
       if (t == pulse_tag) {
         a += now_fp;
@@ -1100,12 +1110,13 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
   double *const aprev_ = aprev;    // members as locals (see located_pass)
   const double *const fcon_ = fcon, *const fkick_ = fkick, *const u_ = u, *const w_ = w;
   const int *const left_ = left;
+  const double k1_ = k1, k3_ = k3;
   const double hh = 0.5 * h;
   double check = 0.0;
   auto accel = [&](int i, double &a, double &av) {
     double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
     double fvl = left_[i] >= 0 ? fkick_[left_[i]] : 0.0;
-    bead_acc<EXT>(i, fl, fcon_[i], fvl, fkick_[i], u_[i], w_[i], a, av);
+    bead_acc<EXT>(i, fl, fcon_[i], fvl, fkick_[i], u_[i], w_[i], k1_, k3_, a, av);
     check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
   };
   for (size_t r = 0; r < runs.size(); r += 2)
@@ -1171,7 +1182,7 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   const Con *const con = cons.data();
   const int ncon = (int) cons.size();
   for (int k = 0; k < ncon; k++) {
-    const Con c = con[k];
+    const Con &c = con[k];
     double d = u_[c.l] - u_[c.r] - gap_;
     double rate = w_[c.l] - w_[c.r];
     double F = 0.0, Fv = 0.0, g, gd;
@@ -1730,8 +1741,8 @@ void FixMdgranChain::finish_bead(int n, int k, double fl, double fr, double fvl,
                                  double h)
 {
   double a, av;
-  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], a, av);
-  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], a, av);
+  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], k1, k3, a, av);
+  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], k1, k3, a, av);
   wa[n][k] = a;
   wv[n][k] = wv[n][k] + 0.5 * h * av;
 }
@@ -1931,8 +1942,8 @@ void FixMdgranChain::finish_neighbour(tagint b, double h, double f_edge, double 
     dj = -impulse;
   }
   const double ub = x - wx0[k];
-  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, ub, ve, a, av);
-  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, ub, ve, a, av);
+  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, ub, ve, k1, k3, a, av);
+  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, ub, ve, k1, k3, a, av);
   const double v1 = vh + 0.5 * h * av + dj * (mixed ? m_inv_mass[b] : 1.0);
   if (slot_mine(k)) wout.push_back({wi[k], x, v1, a});
 }
@@ -1973,9 +1984,9 @@ int FixMdgranChain::resolve_window(tagint lo, tagint hi, double t0, double dt,
       ns = locate_window_events(c, h, tol, jl, jr, wswitch, te);
       last = ns == 0 || te >= h - tol;
     }
-    int grow = 0;
-    for (tagint t : wswitch)
-      if (ns) grow |= (t == edge_l ? 1 : 0) | (t == edge_r ? 2 : 0);
+    int grow = 0;    // an edge contact switches: take that neighbour in
+    if (ns > 0)
+      for (tagint t : wswitch) grow |= (t == edge_l ? 1 : 0) | (t == edge_r ? 2 : 0);
     if (grow) return grow;
     if (last || redo > 0) {    // keep this sub-step
       visc += 0.5 * h * (p_state + wp.power);
@@ -1998,7 +2009,6 @@ int FixMdgranChain::resolve_window(tagint lo, tagint hi, double t0, double dt,
       continue;
     }
     const double tev = last ? t0 + dt : t0 + done + te;
-    set_drive_time(tev);
     p_state += window_settle(c, wswitch, tev);
     if (++nsub > MAX_SUBSTEPS)
       error->one(FLERR, "more than {} events in one step at t = {:.12g}", MAX_SUBSTEPS, tev);

@@ -156,7 +156,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   struct Event {
     bigint step;
     tagint left;                            // tag of the contact's left atom
-    int kind;                               // 1 close, -1 open
+    int kind;                               // 1 close, 0 open
     double time;
   };
   std::vector<Event> ev_local;              // since the last sync, this rank
@@ -182,7 +182,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   template <bool EXT> void accelerate_t(double h, int last);
   template <bool EXT>
   inline void bead_acc(int i, double fl, double fr, double fvl, double fvr, double ui,
-                       double wi, double &a, double &av) const;
+                       double wi, double k1_, double k3_, double &a, double &av) const;
   void drift(double h);
   void accelerate(double h, int last);
   void located_step();
