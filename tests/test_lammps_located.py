@@ -1,10 +1,11 @@
 """The native contact's located-events mode (``fix mdgran/chain ... events located``).
 
 The fix integrates the chain itself (velocity Verlet), locates each snap event inside the step
-and splits the step there, as the fast backend does: second order in dt through events.  Checked
-against the reference backend (event-driven, tolerance 1e-12): the error shrinks ~4x when dt
-halves, the events are the reference's, the ledger closes to the fast backend's level; 1 and 2
-MPI ranks agree.  (The quantized mode against the hook, bitwise: tests/test_lammps_plugin.py.)
+and steps the event's window of beads again alone, split there, as the fast backend does:
+second order in dt through events.  Checked against the reference backend (event-driven,
+tolerance 1e-12): the error shrinks ~4x when dt halves, the events are the reference's, the
+ledger closes to the fast backend's level; 1 and 2 MPI ranks agree bit for bit, windows across
+the slab boundary included, and a window beyond the ghosts stops the run.  (The quantized mode against the hook, bitwise: tests/test_lammps_plugin.py.)
 """
 import shutil
 import subprocess
