@@ -1517,15 +1517,16 @@ void FixMdgranChain::located_step()
 // neighbour) that switches, or is closed in the mean-force band, makes the window take that
 // neighbour in and start again.  The neighbours are finished with the window's end force on
 // the contact they share and take the difference between the window's impulse on it and the
-// step's trapezoid, so that the contact's two beads get equal and opposite impulses.
+// step's trapezoid, so that the contact's two beads get equal and opposite impulses (a
+// neighbour across an open edge keeps the pass's numbers: the window's force on it is 0).
 //
 // Several ranks: every rank steps every window whose beads, neighbours and the beads within
 // WINDOW_MARGIN of them it holds (owned or ghost), from the same numbers (ghosts: forwarded
 // start state, forwarded x of the pass), in chain order; so a window across a rank boundary
-// is stepped identically by both ranks, and each keeps the beads it owns, logs the events of
+// is stepped identically by both ranks, and each keeps the atoms it owns, logs the events of
 // the contacts it owns and adds their damping power and its beads' excitation power.  A
-// window that some rank owning one of its beads or neighbours cannot see whole stops the run
-// (raise comm_modify cutoff).
+// window that a rank owning an atom it writes cannot see whole stops the run (raise
+// comm_modify cutoff).
 
 inline int FixMdgranChain::slot_mine(int k) const
 {
