@@ -65,10 +65,11 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   (``_account``, ``_sync_hook``), the fix's ``pulse`` and ``base`` keywords (its vector's 4th
   element).  Undriven scenes take none of this.
 * **Located events** (``events="located"``, the default with the native contact): the fix
-  integrates the chain itself (``fix move`` and ``fix substrate`` go) and splits each step at
-  its earliest contact event over all ranks (the fast backend steps an event's window of beads
-  alone instead): second order in dt through snap events (``order = 2``; docs/lammps.md).  ``events="quantized"``: the hook's
-  step-quantized switching, bitwise the hook's run.
+  integrates the chain itself (``fix move`` and ``fix substrate`` go) and steps each event's
+  window of beads alone inside the step, as the fast backend does: second order in dt through
+  snap events (``order = 2``; docs/lammps.md); on several ranks the ghost cut-off is
+  :data:`LOCATED_GHOST_SPACINGS`.  ``events="quantized"``: the hook's step-quantized
+  switching, bitwise the hook's run.
 """
 from __future__ import annotations
 
@@ -91,6 +92,10 @@ from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Integration
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
 GHOST_SPACINGS = 2.5
+#: ... and with located events on several ranks: each rank steps the event windows that write
+#: its beads, and needs the beads within 3 of a window (fix mdgran/chain's WINDOW_MARGIN): with
+#: 8.5 spacings a window of up to 5 beads next to a slab boundary (a snap-off's is 2)
+LOCATED_GHOST_SPACINGS = 8.5
 #: (tag, acceleration) pairs a rank sends in the one collective of a step (_share_aprev)
 SHARE_SLOTS = 8
 #: ledger bound C dt**2 of the located native mode (Backend.ledger_model), per unit of E_s:
@@ -247,7 +252,9 @@ class LammpsBackend(Backend):
         variables = {"ntot": self.ntot, "spacing": repr(spacing), "walls": int(self.walls),
                      "k1": repr(float(self.model.k1)), "struck": struck,
                      "v0": repr(float(d["impulse"]["velocity"])), "dt": repr(self.dt),
-                     "ghostcut": repr(GHOST_SPACINGS * spacing),
+                     "ghostcut": repr(spacing * (LOCATED_GHOST_SPACINGS
+                                                 if self.event_mode == "located"
+                                                 else GHOST_SPACINGS)),
                      "thermo_every": max(1, self.steps_per_frame)}
         for k, v in variables.items():
             lmp.command(f"variable {k} equal {v}")

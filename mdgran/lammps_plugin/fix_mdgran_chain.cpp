@@ -4,8 +4,10 @@
 // same law, same step-quantized switching, same floating-point operations in the same order,
 // so that the two agree to round-off ("events quantized", the default).  With "events located"
 // the fix integrates the chain itself and locates each contact event inside the step, as
-// mdgran's fast backend does: second order in dt through snap events (section "located events"
-// below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
+// mdgran's fast backend does: the pass steps the whole chain, and each event's window of beads
+// is stepped again alone through its events while the beads next to it move on their
+// parabolas, so a step costs O(N + events) and no event needs a collective call; second order
+// in dt through snap events (sections "located events" and "event windows" below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
 // units (mdgran/units.py): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
@@ -78,8 +80,13 @@
 // the rank owning its left atom (events and dissipation there); the rank owning the right atom
 // repeats the same update on a ghost copy of the state (forward-communicated every step with
 // x0 and a(t)), so both agree; comm_modify vel yes and a ghost cut-off above the largest
-// |x_(k+1) - x_k| of a closed contact are needed.  Sums over ranks are synced at set-up and at
-// the end of every run, and when a global output is asked for (thermo, extract_fix).
+// |x_(k+1) - x_k| of a closed contact are needed.  Located, every rank steps each event window
+// that writes one of its atoms, from the step's start forwarded to the ghosts (x0, state, xs,
+// vs, aprev), identically on every rank: it needs the atoms within WINDOW_MARGIN (3) beads of
+// the window as ghosts, or the run stops with a line saying so (raise comm_modify cutoff);
+// positions, velocities and events are then those of one rank bit for bit.  Sums over ranks
+// are synced at set-up and at the end of every run, and when a global output is asked for
+// (thermo, extract_fix).
 #include "fix_mdgran_chain.h"
 
 #include "atom.h"
@@ -107,12 +114,15 @@ static constexpr int NPERATOM = 4;        // stored in restart files: x0, closed
 static constexpr int NEXCHANGE = 6;       // migrate with the atom: those, and xs, vs (located)
 // located events (as mdgran/backends/fast_kernel.py)
 static constexpr int MAX_SWITCHES = 4;    // switches of one contact at one instant (chatter)
-static constexpr int MAX_SUBSTEPS = 10000;    // event splits in one step
+static constexpr int MAX_SUBSTEPS = 10000;    // event splits of one window in one step
+static constexpr int WINDOW_MARGIN = 3;   // a window needs the atoms within this many beads
+                                          // of it: its neighbours, their other contacts, and
+                                          // a flagged contact that would join it
 static constexpr double SIMULTANEOUS = 1e-12;    // events within this * (1 + t) switch together
 static constexpr double STATE_TOL = 1e-12;    // a contact beyond its switching point by more
                                               // than this (units p) switches at once
-static constexpr double SING_BAND = 0.1;
-static constexpr double PI = 3.141592653589793;    // Python's math.pi (the pulse's sine)    // mean-force kick below delta_min + SING_BAND
+static constexpr double SING_BAND = 0.1;    // mean-force kick below delta_min + SING_BAND
+static constexpr double PI = 3.141592653589793;    // Python's math.pi (the pulse's sine)
 // 5-point Gauss-Legendre nodes and weights on [-1, 1]
 static constexpr double GL_X[5] = {-0.9061798459386640, -0.5384693101056831, 0.0,
                                    0.5384693101056831, 0.9061798459386640};
@@ -228,6 +238,10 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   time_integrate = located || integrate;
 
   ntags = (tagint) atom->natoms;
+  own_lo = known_lo = 1;
+  own_hi = known_hi = ntags;
+  wbase = 1;
+  chat_time = -1.0;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
   if (!base_file.empty()) read_base(base_file.c_str());
   driven = pulse_tag != 0 || based;
@@ -568,14 +582,14 @@ inline double FixMdgranChain::disp(int i) const
 // never in between (it cost ~17% of a step when rebuilt every step).
 void FixMdgranChain::setup_pre_neighbor()
 {
-  contacts_stale = 1;
-  drift_h = -1.0;    // local indices change: u and w of the drift are void
+  pre_neighbor();
 }
 
 void FixMdgranChain::pre_neighbor()
 {
   contacts_stale = 1;
-  drift_h = -1.0;
+  drift_h = -1.0;    // local indices change: u and w of the drift are void
+  if (located) share_ranges();    // the ghosts are new: which atoms each rank holds
 }
 
 void FixMdgranChain::setup(int vflag)
@@ -907,7 +921,8 @@ void FixMdgranChain::ensure_scratch()
 //
 // With "events located" the fix replaces fix nve and fix spring/self: it integrates the chain
 // with the velocity Verlet of mdgran's fast backend (mdgran/backends/fast_kernel.py), locating
-// every contact event inside the step.  A (sub)step of length h from (x0, v0, a0):
+// every contact event inside the step.  A step (or a window's sub-step) of length h from
+// (x0, v0, a0):
 //     v_half = v0 + h/2 a0,   x1 = x0 + h v_half            (drift; initial_integrate)
 //     v_est  = v_half + h/2 a0                               (damping rate at the end)
 //     a1     = a(x1, v_est),  v1 = v_half + h/2 a1           (kick; post_force)
@@ -919,14 +934,16 @@ void FixMdgranChain::ensure_scratch()
 //
 // Inside a step every atom moves on the parabola x0 + s v0 + s^2/2 a0, so the event function
 // of each contact, g = delta - delta_off (closed) or -delta (open), positive inside the state,
-// is the quadratic g(s) = g0 + s g0' + s^2/2 g0''.  A pass flags a contact when its end value
-// could hide a crossing (g1 < 0 or g1 < h/2 g'(h)); the earliest root te over the whole chain
-// (MPI_Allreduce min) splits the step: all atoms are re-integrated to te, the contacts with a
-// root within SIMULTANEOUS of te switch (opening: D_hysteresis += V(delta(te)), exact law),
-// contacts on their switching point and moving out switch back at once (settle), the
-// acceleration and damping power are recomputed in the new states with the actual velocities,
-// and the rest of the step dt - te is integrated as a new substep (repeated for later events).
-// Events are rare: the common step costs one drift, one force pass and one kick.
+// is the quadratic g(s) = g0 + s g0' + s^2/2 g0''.  The pass steps the whole chain over dt and
+// flags a contact when its end value could hide a crossing (g1 < 0 or g1 < h/2 g'(h)).  A
+// contact that switches at s inside the step changes the force on its two beads only, so the
+// event is handled there: the beads of the flagged contacts with a root in the step form event
+// windows, each stepped again alone from the step's start and split at its own events (section
+// "event windows" below: the contacts with a root within SIMULTANEOUS of the window's earliest
+// switch there, opening: D_hysteresis += V(delta(te)), exact law; contacts on their switching
+// point and moving out switch back at once, settle), while the beads next to it move on their
+// parabolas.  A step costs one drift, one force pass and one kick over the chain, plus a few
+// passes over a few beads per event; no event needs a collective call.
 
 // The contacts this rank evaluates: those of its owned atoms with their right neighbour (own),
 // and those whose left atom is a ghost and right atom owned (a copy updated identically).
@@ -961,6 +978,13 @@ void FixMdgranChain::build_contacts()
     left[i] = l;
     if (l >= nlocal) cons.push_back({l, i, 0});
   }
+  gcons.clear();    // located, several ranks: the ghosts' own contacts, for event windows
+  if (located)
+    for (int i = nlocal; i < nall; i++) {
+      if (tag[i] >= natoms) continue;
+      int j = atom->map(tag[i] + 1);
+      if (j >= nlocal) gcons.push_back({i, j, 0});
+    }
   // the owned atoms this fix moves (located, or integrate yes), as runs [begin, end) of local
   // indices (the loops over them then test nothing per atom), the others (still), and the
   // walls among the owned and ghost atoms (u = 0, v = 0)
@@ -999,13 +1023,13 @@ double MdgranLaw::mean_force(double d0, double d1) const
   return num / den;
 }
 
-// Drift of the owned moving atoms from the substep start (xs, vs, aprev) over h:
+// Drift of the owned moving atoms over the step h from its start, which it records first
+// (xs, vs: the current x and v of every owned atom; aprev is the start's acceleration):
 //   v = vs + h/2 a0 (= v_half),  x = xs + h v.   Ghosts follow by forward communication.
-// start: a new substep starts here, from the current x and v of every owned atom (xs, vs).
 // It also leaves the owned atoms' u and w for the pass over h that follows (drift_h = h), the
 // numbers that pass would compute from x and v: one read of LAMMPS's x and v rows (3 doubles
 // per atom) fewer per step.
-void FixMdgranChain::drift(double h, int start)
+void FixMdgranChain::drift(double h)
 {
   if (contacts_stale) build_contacts();    // runs and still are those of the current atoms
   double *x = flat(atom->x), *v = flat(atom->v);
@@ -1014,10 +1038,8 @@ void FixMdgranChain::drift(double h, int start)
   const double hh = 0.5 * h;
   for (size_t r = 0; r < runs.size(); r += 2)
     for (int i = runs[r]; i < runs[r + 1]; i++) {
-      if (start) {
-        xs_[i] = x[3 * i];
-        vs_[i] = v[3 * i];
-      }
+      xs_[i] = x[3 * i];
+      vs_[i] = v[3 * i];
       double vh = vs_[i] + hh * aprev_[i];
       double x1 = xs_[i] + h * vh;
       x[3 * i] = x1;
@@ -1026,10 +1048,8 @@ void FixMdgranChain::drift(double h, int start)
       w_[i] = vh + hh * aprev_[i];
     }
   for (int i : still) {
-    if (start) {
-      xs_[i] = x[3 * i];
-      vs_[i] = v[3 * i];
-    }
+    xs_[i] = x[3 * i];
+    vs_[i] = v[3 * i];
     u_[i] = x[3 * i] - x0_[i];
     w_[i] = v[3 * i] + hh * aprev_[i];
   }
@@ -1037,7 +1057,7 @@ void FixMdgranChain::drift(double h, int start)
 }
 
 // The owned atoms' accelerations at the end of a pass of length h (located_pass: contact and
-// kick forces by left atom), which become the next substep's a0 (aprev), and the kick of the
+// kick forces by left atom), which become the next step's a0 (aprev), and the kick of the
 // moving ones, v = v_half + h/2 a_kick (h = 0: v unchanged).  last: the step ends here, and
 // LAMMPS's force array gets the acceleration (mass 1) for its computes and dumps.  One loop
 // over the atoms (a separate kick loop cost ~15% of a step, memory traffic).
@@ -1045,6 +1065,42 @@ void FixMdgranChain::accelerate(double h, int last)
 {
   if (extended) accelerate_t<true>(h, last);
   else accelerate_t<false>(h, last);
+}
+
+// Acceleration a and kick acceleration av of atom i (not a wall) from the forces of its left
+// and right contacts (fl, fr; fvl, fvr with the mean-force kick), its displacement ui and
+// velocity estimate wi: a = fl - fr - (k1 u + k3 u^3) (mass 1); EXT (unlike beads, substrate
+// damping, excitations): a = (fl - fr [+ F_pulse] - g (k1 y + k3 y^3 + c_s (w - u_b'))) / m
+// with y = u - u_b, at the time of set_drive_time.  k1_, k3_: the members k1, k3, which the
+// caller's loop keeps in registers (read through this, a store to a double array may alias
+// them, and they were reloaded at every atom)
+template <bool EXT>
+inline void FixMdgranChain::bead_acc(int i, double fl, double fr, double fvl, double fvr,
+                                     double ui, double wi, double k1_, double k3_, double &a,
+                                     double &av) const
+{
+  a = fl - fr;
+  av = fvl - fvr;
+  double sub = k1_ * ui + k3_ * ui * ui * ui;    // substrate: k1 u + k3 u^3
+  if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
+    const tagint t = atom->tag[i];
+    if (driven) {    // the substrate on u - u_b, w - u_b'; the pulse on its atom
+      const double y = ui - now_ub;
+      sub = k1_ * y + k3_ * y * y * y;
+      wi = wi - now_vb;
+      if (t == pulse_tag) {
+        a += now_fp;
+        av += now_fp;
+      }
+    }
+    sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * wi);
+    const double im = mixed ? m_inv_mass[t] : 1.0;
+    a = (a - sub) * im;
+    av = (av - sub) * im;
+  } else {
+    a -= sub;
+    av -= sub;
+  }
 }
 
 // accelerate of the homogeneous chain (EXT false) or of unlike beads or a damped substrate
@@ -1057,33 +1113,10 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
   const double k1_ = k1, k3_ = k3;
   const double hh = 0.5 * h;
   double check = 0.0;
-  // a = F_left - F_right - (k1 u + k3 u^3), and av the same with the kick forces
   auto accel = [&](int i, double &a, double &av) {
     double fl = left_[i] >= 0 ? fcon_[left_[i]] : 0.0;
     double fvl = left_[i] >= 0 ? fkick_[left_[i]] : 0.0;
-    a = fl - fcon_[i];
-    av = fvl - fkick_[i];
-    double sub = k1_ * u_[i] + k3_ * u_[i] * u_[i] * u_[i];    // substrate: k1 u + k3 u^3
-    if constexpr (EXT) {    // g (k1 u + k3 u^3 + c_s w), all over the bead's mass
-      const tagint t = atom->tag[i];
-      double wi = w_[i];
-      if (driven) {    // the substrate on u - u_b, w - u_b'; the pulse on its atom
-        const double y = u_[i] - now_ub;
-        sub = k1_ * y + k3_ * y * y * y;
-        wi = wi - now_vb;
-        if (t == pulse_tag) {
-          a += now_fp;
-          av += now_fp;
-        }
-      }
-      sub = (mixed ? m_on_site[t] : 1.0) * (sub + sub_damping * wi);
-      const double im = mixed ? m_inv_mass[t] : 1.0;
-      a = (a - sub) * im;
-      av = (av - sub) * im;
-    } else {
-      a -= sub;
-      av -= sub;
-    }
+    bead_acc<EXT>(i, fl, fcon_[i], fvl, fkick_[i], u_[i], w_[i], k1_, k3_, a, av);
     check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
   };
   for (size_t r = 0; r < runs.size(); r += 2)
@@ -1181,10 +1214,17 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
       gd = -rate;
     }
     // a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
-    if (h > 0.0 && (g < 0.0 || g < hh * gd)) flagged.push_back(k);
+    if (h > 0.0 && (g < 0.0 || g < hh * gd)) flagged.push_back(c);
     fcon_[c.l] = F;
     fkick_[c.l] = Fv;
   }
+  if (h > 0.0)    // the same test for the contacts between two ghosts (event windows)
+    for (const Con &c : gcons) {
+      const double d = u_[c.l] - u_[c.r] - gap_, rate = w_[c.l] - w_[c.r];
+      const int cl = closed_[c.l] != 0.0;
+      const double g = cl ? d - off_of(tag[c.l]) : -d, gd = cl ? rate : -rate;
+      if (g < 0.0 || g < hh * gd) flagged.push_back(c);
+    }
   if (sub_damping != 0.0)    // the substrate's damping power, g c_s w^2 of the moving beads
     for (size_t q = 0; q < runs.size(); q += 2)
       for (int i = runs[q]; i < runs[q + 1]; i++)
@@ -1198,36 +1238,62 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
 // located_pass of a closed unlike contact c at compression d: its force F = A f(d / L) and
 // kick force Fv (the mean force near its snap-off, in its own units), its threshold returned
 inline double FixMdgranChain::mixed_located(const Con &c, double d, double h, double &F,
-                                            double &Fv)
+                                            double &Fv) const
 {
   const tagint jt = atom->tag[c.l];
-  const MdgranLaw &law = laws[m_cls[jt]];
-  const double il = m_inv_len[jt], A = m_scale[jt], u1 = d * il;
-  if (law.use_table && u1 > law.tab_delta_max)
-    error->one(FLERR, "compression {:.4g} (own units) beyond the contact table (delta_max = "
-               "{:g}) at t = {:.12g}, contact {}", u1, law.tab_delta_max,
-               update->ntimestep * update->dt, contact_number(jt));
-  F = A * law.located_force(u1);
+  F = closed_force(jt, d);
   Fv = F;
-  if (h > 0.0 && u1 < law.sing) {
-    double u0 = (ustart(c.l) - ustart(c.r) - gap) * il;
-    Fv = A * (2.0 * law.mean_force(u0, u1) - law.located_force(u0));
-  }
+  if (h > 0.0 && in_band(jt, d)) Fv = kick_force(jt, ustart(c.l) - ustart(c.r) - gap, d);
   return m_delta_off[jt];
 }
 
-// First s in [0, h] where g(s) = g0 + s g0' + s^2/2 g0'' of contact c falls to min(g0, 0),
-// or -1 (mdgran/backends/fast_kernel.py first_root); g0, g0', g0'' from the substep start,
-// g1 from the end of the pass (in u).
-double FixMdgranChain::first_root(const Con &c, double h) const
+// Force f(d) of the closed contact whose left atom has tag t (units eta; unlike beads
+// A f(d / L)); a compression beyond the table stops the run
+double FixMdgranChain::closed_force(tagint t, double d) const
 {
-  double g0 = ustart(c.l) - ustart(c.r) - gap;
-  double b = vstart(c.l) - vstart(c.r);
-  double q = astart(c.l) - astart(c.r);
-  double d1 = u[c.l] - u[c.r] - gap;
-  double g1;
-  if (closed[c.l] != 0.0) {
-    const double off = off_of(atom->tag[c.l]);
+  if (!mixed) {
+    if (use_table && d > tab_delta_max)
+      error->one(FLERR, "compression {:.4g} beyond the contact table (delta_max = {:g}) at "
+                 "t = {:.12g}, contact {}", d, tab_delta_max, update->ntimestep * update->dt,
+                 contact_number(t));
+    return located_force(d);
+  }
+  const MdgranLaw &law = laws[m_cls[t]];
+  const double u1 = d * m_inv_len[t];
+  if (law.use_table && u1 > law.tab_delta_max)
+    error->one(FLERR, "compression {:.4g} (own units) beyond the contact table (delta_max = "
+               "{:g}) at t = {:.12g}, contact {}", u1, law.tab_delta_max,
+               update->ntimestep * update->dt, contact_number(t));
+  return m_scale[t] * law.located_force(u1);
+}
+
+// Whether closed contact t at compression d gets the mean-force kick (never for Hertz): in its
+// law's band delta < delta_min + SING_BAND, in its own units when mixed
+int FixMdgranChain::in_band(tagint t, double d) const
+{
+  if (!mixed) return d < sing;
+  return d * m_inv_len[t] < laws[m_cls[t]].sing;
+}
+
+// Kick force of closed contact t over a (sub)step from compression d0 to d:
+// Fv = 2 (V(d) - V(d0)) / (d - d0) - f(d0), so that h/2 (f(d0) + Fv) = h f_mean
+double FixMdgranChain::kick_force(tagint t, double d0, double d) const
+{
+  if (!mixed) return 2.0 * mean_force(d0, d) - located_force(d0);
+  const MdgranLaw &law = laws[m_cls[t]];
+  const double il = m_inv_len[t], u0 = d0 * il, u1 = d * il;
+  return m_scale[t] * (2.0 * law.mean_force(u0, u1) - law.located_force(u0));
+}
+
+// First s in [0, h] where the event function g(s) = g0 + s g0' + s^2/2 g0'' of a contact falls
+// to min(g0, 0), or -1 (mdgran/backends/fast_kernel.py first_root): g = delta - off closed,
+// -delta open (positive inside the state), from the compression d0, its rate b and second
+// derivative q at the (sub)step's start and the compression d1 at its end (units p, 1/q).
+static double event_root(int is_closed, double off, double d0, double b, double q, double d1,
+                         double h)
+{
+  double g0 = d0, g1;
+  if (is_closed) {
     g0 -= off;
     g1 = d1 - off;
   } else {
@@ -1260,28 +1326,13 @@ double FixMdgranChain::first_root(const Con &c, double h) const
   return -1.0;
 }
 
-// Earliest root te among the flagged contacts of all ranks (-1 if none); the contacts of this
-// rank that switch with it (root within tol of te) go into `switching`.
-double FixMdgranChain::earliest_event(double h, double tol)
+// event_root of contact c over the pass of length h: from the step's start (xs, vs, aprev) to
+// the end of the pass (u)
+double FixMdgranChain::first_root(const Con &c, double h) const
 {
-  switching.clear();
-  roots.resize(flagged.size());
-  double te = INFINITY;
-  for (size_t k = 0; k < flagged.size(); k++) {
-    roots[k] = first_root(cons[flagged[k]], h);
-    if (roots[k] >= 0.0 && roots[k] < te) te = roots[k];
-  }
-  if (comm->nprocs > 1) {
-    double mine = te;
-    MPI_Allreduce(&mine, &te, 1, MPI_DOUBLE, MPI_MIN, world);
-  }
-  if (te == INFINITY) return -1.0;
-  for (size_t k = 0; k < flagged.size(); k++)
-    if (roots[k] >= 0.0 && roots[k] <= te + tol) switching.push_back(flagged[k]);
-  // the owner's order (by tag of the left atom): the same on any number of ranks
-  std::sort(switching.begin(), switching.end(),
-            [&](int a, int b) { return atom->tag[cons[a].l] < atom->tag[cons[b].l]; });
-  return te;
+  return event_root(closed[c.l] != 0.0, off_of(atom->tag[c.l]),
+                    ustart(c.l) - ustart(c.r) - gap, vstart(c.l) - vstart(c.r),
+                    astart(c.l) - astart(c.r), u[c.l] - u[c.r] - gap, h);
 }
 
 void FixMdgranChain::add_visc(double dv)
@@ -1290,10 +1341,10 @@ void FixMdgranChain::add_visc(double dv)
   else d_visc += dv;
 }
 
-void FixMdgranChain::add_event(const Con &c, int kind, double time, double lost)
+// an event of the contact whose left atom has tag left (recorded by the left atom's owner)
+void FixMdgranChain::add_event(tagint left, int kind, double time, double lost)
 {
-  if (!c.own) return;    // the owner of the left atom records it
-  Event e = {update->ntimestep, atom->tag[c.l], kind, time};
+  Event e = {update->ntimestep, left, kind, time};
   if (comm->nprocs == 1) {
     d_hyst_all += lost;
     ev_all.push_back(e);
@@ -1304,17 +1355,18 @@ void FixMdgranChain::add_event(const Con &c, int kind, double time, double lost)
   size_array_rows = (int) ev_all.size();
 }
 
-// Switch contact c at the current positions: opening loses V(delta) (exact law) to
-// D_hysteresis; the new forces follow from the next pass.
+// Switch contact c at the current positions (the set-up's settle): opening loses V(delta)
+// (exact law) to D_hysteresis; the new forces follow from the next pass.
 void FixMdgranChain::switch_contact(const Con &c, double time)
 {
   double d = disp(c.l) - disp(c.r) - gap;
   if (closed[c.l] != 0.0) {
     closed[c.l] = 0.0;
-    add_event(c, 0, time, mixed ? mixed_energy(atom->tag[c.l], d) : law_energy(d));
+    if (c.own) add_event(atom->tag[c.l], 0, time,
+                         mixed ? mixed_energy(atom->tag[c.l], d) : law_energy(d));
   } else {
     closed[c.l] = 1.0;
-    add_event(c, 1, time, 0.0);
+    if (c.own) add_event(atom->tag[c.l], 1, time, 0.0);
   }
 }
 
@@ -1349,7 +1401,7 @@ void FixMdgranChain::settle(std::vector<int> &list, double time)
 // LAMMPS's force array gets the acceleration (mass 1) of the current state (thermo, dumps)
 void FixMdgranChain::initial_integrate(int /*vflag*/)
 {
-  if (located) drift(update->dt, 1);
+  if (located) drift(update->dt);
   else nve(1);
 }
 
@@ -1419,59 +1471,659 @@ void FixMdgranChain::located_setup()
     if (moves(i)) f[i][0] += aprev[i];
 }
 
-// One step (post_force; initial_integrate has drifted the owned atoms over dt and LAMMPS has
-// forwarded the ghosts' x and v): pass, locate, split at the earliest event, repeat.
+// One step (post_force; initial_integrate has drifted the owned atoms over dt from the step's
+// start and LAMMPS has forwarded the ghosts' x and v): the pass over the chain, the event
+// windows stepped alone (local_events), the kick, the windows' end states in place of the
+// pass's, then the trapezoids of the damping power and of the excitations' power, each with
+// what the windows' sub-steps change in it.
 void FixMdgranChain::located_step()
 {
   const bigint step = update->ntimestep;
   const double dt = update->dt;
   const double t0 = (double) (step - 1) * dt;
-  const double tol = SIMULTANEOUS * (1.0 + std::fabs(t0));
   if (contacts_stale) build_contacts();
-  double done = 0.0, h = dt;
-  for (int nsub = 0;; nsub++) {
-    comm->forward_comm(this);    // ghosts: x0, state, substep start (xs, vs, aprev)
-    set_drive_time(t0 + done + h);
-    double p1 = located_pass(h);
-    double te = flagged.empty() && comm->nprocs == 1 ? -1.0 : earliest_event(h, tol);
-    const int last = te < 0.0 || te >= h - tol;    // the pass reaches the end of the step
-    if (!last) {    // redo the substep up to the event
-      h = te;
-      drift(h, 0);
-      comm->forward_comm();
-      set_drive_time(t0 + done + h);
-      p1 = located_pass(h);
-    }
-    accelerate(h, te < 0.0);
-    add_visc(0.5 * h * (power_prev + p1));
-    power_prev = p1;
-    if (driven) {    // the excitations' work, by the same rule (the fast backend's)
-      const double pe = external_power();
-      const double dw = 0.5 * h * (work_prev + pe);
-      if (comm->nprocs == 1) work_all += dw;
-      else work += dw;
-      work_prev = pe;
-    }
-    if (te < 0.0) break;
-    // the event: switch, settle, forces and damping power in the new states
-    const double tev = t0 + done + h;
-    comm->forward_comm();    // ghosts' velocities after the kick
-    std::vector<int> list = switching;
-    for (int k : list) switch_contact(cons[k], tev);
-    settle(list, tev);
-    comm->forward_comm(this);
-    power_prev = located_pass(0.0);
-    accelerate(0.0, last);
-    if (last) break;
-    if (nsub >= MAX_SUBSTEPS)
-      error->one(FLERR, "more than {} events in one step at t = {:.12g}", MAX_SUBSTEPS, tev);
-    done += h;
-    h = dt - done;
-    drift(h, 1);
-    comm->forward_comm();
+  comm->forward_comm(this);    // ghosts: x0, state, the step's start (xs, vs, aprev)
+  set_drive_time(t0 + dt);
+  const double p1 = located_pass(dt);
+  double viscous = 0.0, power = 0.0, work_w = 0.0;    // the windows' changes (this rank's)
+  wout.clear();
+  if (!flagged.empty()) {
+    local_events(t0, dt, viscous, power, work_w);
+    set_drive_time(t0 + dt);
+  }
+  accelerate(dt, 1);
+  if (!wout.empty()) commit_windows();
+  add_visc(0.5 * dt * (power_prev + p1) + viscous);
+  power_prev = p1 + power;
+  if (driven) {    // the excitations' work, by the same rule (the fast backend's)
+    const double pe = external_power();
+    const double dw = 0.5 * dt * (work_prev + pe) + work_w;
+    if (comm->nprocs == 1) work_all += dw;
+    else work += dw;
+    work_prev = pe;
   }
   last_step = step;
   have_last = 1;
+}
+
+// ---- event windows --------------------------------------------------------------------------
+//
+// (mdgran/backends/fast_kernel.py local_events and the functions it calls, in tags: bead t's
+// left contact is t - 1, its right one t.)  The beads of the contacts whose event function has
+// a root in the step form windows lo .. hi (two within two beads of each other are one).  A
+// window is stepped again alone from the step's start (slots: copy 2 the start, copies 0 and 1
+// the alternating sub-step states), through its events in time order, while its neighbours
+// lo - 1 and hi + 1 move on their parabolas x + s v + s^2/2 a; an edge contact (to a
+// neighbour) that switches, or is closed in the mean-force band, makes the window take that
+// neighbour in and start again.  The neighbours are finished with the window's end force on
+// the contact they share and take the difference between the window's impulse on it and the
+// step's trapezoid, so that the contact's two beads get equal and opposite impulses (a
+// neighbour across an open edge keeps the pass's numbers: the window's force on it is 0).
+//
+// Several ranks: every rank steps every window whose beads, neighbours and the beads within
+// WINDOW_MARGIN of them it holds (owned or ghost), from the same numbers (ghosts: forwarded
+// start state, forwarded x of the pass), in chain order; so a window across a rank boundary
+// is stepped identically by both ranks, and each keeps the atoms it owns, logs the events of
+// the contacts it owns and adds their damping power and its beads' excitation power.  A
+// window that a rank owning an atom it writes cannot see whole stops the run (raise
+// comm_modify cutoff).
+
+inline int FixMdgranChain::slot_mine(int k) const
+{
+  return wi[k] < atom->nlocal;
+}
+
+// Tags owned here and held contiguously around them (owned and ghost), gathered from every
+// rank (collective: at set-up and re-neighbouring, when the ghosts are made)
+void FixMdgranChain::share_ranges()
+{
+  ntags = (tagint) atom->natoms;
+  own_lo = ntags + 1;
+  own_hi = 0;
+  for (int i = 0; i < atom->nlocal; i++) {
+    own_lo = std::min(own_lo, atom->tag[i]);
+    own_hi = std::max(own_hi, atom->tag[i]);
+  }
+  known_lo = own_lo;
+  known_hi = own_hi;
+  while (known_lo > 1 && atom->map(known_lo - 1) >= 0) known_lo--;
+  while (known_hi < ntags && atom->map(known_hi + 1) >= 0) known_hi++;
+  if (comm->nprocs == 1) return;
+  tagint mine[4] = {own_lo, own_hi, known_lo, known_hi};
+  rank_ranges.resize(4 * (size_t) comm->nprocs);
+  MPI_Allgather(mine, 4, MPI_LMP_TAGINT, rank_ranges.data(), 4, MPI_LMP_TAGINT, world);
+}
+
+// this rank holds every atom within WINDOW_MARGIN beads of window lo .. hi (the beads a
+// neighbour's other contact and a window joining it need)
+int FixMdgranChain::window_visible(tagint lo, tagint hi) const
+{
+  for (tagint t = std::max<tagint>(lo - WINDOW_MARGIN, 1);
+       t <= std::min<tagint>(hi + WINDOW_MARGIN, ntags); t++)
+    if (atom->map(t) < 0) return 0;
+  return 1;
+}
+
+// The atoms a .. b that window lo .. hi writes: its beads, and each neighbour whose contact with
+// it is closed (one that is open stays open through the step, or the window takes the
+// neighbour in, and the neighbour keeps the pass's numbers, bit for bit); a contact whose state
+// this rank does not hold counts as closed
+void FixMdgranChain::window_writes(tagint lo, tagint hi, tagint &a, tagint &b) const
+{
+  a = lo;
+  b = hi;
+  if (lo - 1 >= 1 && !is_wall(lo - 1)) {
+    const int i = atom->map(lo - 1);
+    if (i < 0 || closed[i] != 0.0) a = lo - 1;
+  }
+  if (hi + 1 <= ntags && !is_wall(hi + 1)) {
+    const int i = atom->map(hi);
+    if (i < 0 || closed[i] != 0.0) b = hi + 1;
+  }
+}
+
+// window lo .. hi writes an atom owned here
+int FixMdgranChain::window_writes_owned(tagint lo, tagint hi) const
+{
+  tagint a, b;
+  window_writes(lo, hi, a, b);
+  for (tagint t = a; t <= b; t++) {
+    const int i = atom->map(t);
+    if (i >= 0 && i < atom->nlocal) return 1;
+  }
+  return 0;
+}
+
+// every rank owning an atom window lo .. hi writes holds the window with its margin (so that it
+// steps the same window), or the run stops
+void FixMdgranChain::check_window_ranks(tagint lo, tagint hi) const
+{
+  tagint wa_, wb_;
+  window_writes(lo, hi, wa_, wb_);
+  const tagint a = std::max<tagint>(lo - WINDOW_MARGIN, 1);
+  const tagint b = std::min<tagint>(hi + WINDOW_MARGIN, ntags);
+  for (int p = 0; p < comm->nprocs; p++) {
+    const tagint *r = &rank_ranges[4 * (size_t) p];
+    if (r[0] > wb_ || r[1] < wa_) continue;    // owns none of the atoms it writes
+    if (a < r[2] || b > r[3])
+      error->one(FLERR, "fix mdgran/chain: the event window of atoms {}..{} at step {} needs "
+                 "atoms {}..{}, beyond those rank {} holds, {}..{} (raise comm_modify cutoff)",
+                 lo, hi, update->ntimestep, a, b, p, r[2], r[3]);
+  }
+}
+
+// The windows of the pass of length h: the beads of the flagged contacts with a root in the
+// step, in chain order, two within two beads of each other joined
+void FixMdgranChain::find_windows(double h)
+{
+  const tagint *tag = atom->tag;
+  std::sort(flagged.begin(), flagged.end(),
+            [&](const Con &a, const Con &b) { return tag[a.l] < tag[b.l]; });
+  const tagint first = walls ? 2 : 1, last = walls ? ntags - 1 : ntags;    // moving beads
+  wins.clear();
+  for (const Con &c : flagged) {
+    if (first_root(c, h) < 0.0) continue;
+    const tagint lo = std::max(tag[c.l], first), hi = std::min(tag[c.l] + 1, last);
+    if (!wins.empty() && lo <= wins.back().hi + 2) wins.back().hi = std::max(wins.back().hi, hi);
+    else wins.push_back({lo, hi});
+  }
+}
+
+// The slots of window lo .. hi (atoms lo - 2 .. hi + 2 of the chain) at the step's start, in
+// copies 2 and 0 (walls: u = v = a = 0)
+void FixMdgranChain::load_window(tagint lo, tagint hi)
+{
+  wbase = std::max<tagint>(lo - 2, 1);
+  const int n = (int) (std::min<tagint>(hi + 2, ntags) - wbase + 1);
+  wi.resize(n);
+  wx0.resize(n);
+  wve.resize(n);
+  for (int c = 0; c < 3; c++) {
+    wx[c].resize(n);
+    wv[c].resize(n);
+    wa[c].resize(n);
+  }
+  for (int k = 0; k < n; k++) {
+    const int i = atom->map(wbase + k);
+    if (i < 0)
+      error->one(FLERR, "fix mdgran/chain: the event window of atoms {}..{} needs atom {}, "
+                 "beyond the ghosts (raise comm_modify cutoff)", lo, hi, wbase + k);
+    wi[k] = i;
+    wx0[k] = x0[i];
+    if (slot_wall(k)) {
+      wx[2][k] = x0[i];
+      wv[2][k] = wa[2][k] = 0.0;
+    } else {
+      if (!moves(i))
+        error->one(FLERR, "fix mdgran/chain: an event window reaches atom {}, which is not in "
+                   "the fix group", wbase + k);
+      wx[2][k] = xs[i];
+      wv[2][k] = vs[i];
+      wa[2][k] = aprev[i];
+    }
+    wx[0][k] = wx[2][k];
+    wv[0][k] = wv[2][k];
+    wa[0][k] = wa[2][k];
+  }
+}
+
+// Slot k's end of a Verlet (sub)step of length h from copy c: x, v_half and v_est (walls: at
+// rest), the drift's operations
+void FixMdgranChain::predict(int c, int k, double h, double &x, double &vh, double &ve) const
+{
+  if (slot_wall(k)) {
+    x = wx0[k];
+    vh = ve = 0.0;
+    return;
+  }
+  const double hh = 0.5 * h, a = wa[c][k];
+  vh = wv[c][k] + hh * a;
+  x = wx[c][k] + h * vh;
+  ve = vh + hh * a;
+}
+
+// The substrate damping power g c_s (w - u_b')^2 of slot k at velocity w (0 unless its bead is
+// owned here)
+double FixMdgranChain::bead_power(int k, double ve) const
+{
+  if (sub_damping == 0.0 || !slot_mine(k)) return 0.0;
+  const double wv_ = driven ? ve - now_vb : ve;
+  return (mixed ? m_on_site[wbase + k] : 1.0) * (sub_damping * wv_ * wv_);
+}
+
+// This rank's damping power in window lo .. hi at copy c (rates from v): its contacts, edges
+// included, and its beads' substrate damping
+double FixMdgranChain::window_power(int c, tagint lo, tagint hi) const
+{
+  double p = 0.0;
+  if (damping != 0.0)
+    for (tagint t = std::max<tagint>(lo - 1, 1); t <= std::min<tagint>(hi, ntags - 1); t++) {
+      const int kl = slot(t);
+      if (closed[wi[kl]] == 0.0 || !slot_mine(kl)) continue;
+      const double r = wv[c][kl] - wv[c][kl + 1];
+      p += damping * r * r;
+    }
+  for (tagint t = lo; t <= hi; t++) p += bead_power(slot(t), wv[c][slot(t)]);
+  return p;
+}
+
+// This rank's share of the excitations' power on the window's beads at copy c (as
+// external_power)
+double FixMdgranChain::window_external(int c, tagint lo, tagint hi) const
+{
+  double p = 0.0, total = 0.0;
+  for (tagint t = lo; t <= hi; t++) {
+    const int k = slot(t);
+    if (!slot_mine(k)) continue;
+    if (t == pulse_tag) p += now_fp * wv[c][k];
+    if (based) {
+      const double y = slot_u(c, k) - now_ub;
+      double fs = -(k1 * y + k3 * y * y * y + sub_damping * (wv[c][k] - now_vb));
+      total += mixed ? m_on_site[t] * fs : fs;
+    }
+  }
+  return p + now_vb * total;
+}
+
+// Force of contact t (left tag; 0: none) at copy c, damping rate from v
+double FixMdgranChain::start_force(int c, tagint t) const
+{
+  if (t == 0) return 0.0;
+  const int kl = slot(t);
+  if (closed[wi[kl]] == 0.0) return 0.0;
+  double f = closed_force(t, slot_u(c, kl) - slot_u(c, kl + 1) - gap);
+  if (damping != 0.0) f += damping * (wv[c][kl] - wv[c][kl + 1]);
+  return f;
+}
+
+// Finish slot k of a window sub-step of length h into copy n: its acceleration and end velocity
+// v_half + h/2 a_v from its contact forces (fl, fr; fvl, fvr with the kick), as accelerate
+void FixMdgranChain::finish_bead(int n, int k, double fl, double fr, double fvl, double fvr,
+                                 double h)
+{
+  double a, av;
+  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], k1, k3, a, av);
+  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, slot_u(n, k), wve[k], k1, k3, a, av);
+  wa[n][k] = a;
+  wv[n][k] = wv[n][k] + 0.5 * h * av;
+}
+
+// One Verlet (sub)step of window lo .. hi of length h ending at t1, from copy c into 1 - c: its
+// beads as the pass steps them (mean-force kick near snap-off included), its neighbours along
+// their parabolas (v = v0 + h a, a unchanged).  Returns this rank's damping power at the end
+// (rates from v_est), the forces of its edge contacts and which edge is closed in the band.
+FixMdgranChain::WinPass FixMdgranChain::window_pass(int c, double h, double t1, tagint lo,
+                                                    tagint hi)
+{
+  const int n = 1 - c;
+  set_drive_time(t1);
+  for (tagint t = std::max<tagint>(lo - 1, 1); t <= std::min<tagint>(hi + 1, ntags); t++) {
+    const int k = slot(t);
+    predict(c, k, h, wx[n][k], wv[n][k], wve[k]);
+  }
+  WinPass out = {0.0, 0.0, 0.0, 0};
+  double f_l = 0.0, fv_l = 0.0;    // force of the contact left of the bead to finish next
+  for (tagint t = std::max<tagint>(lo - 1, 1); t <= std::min<tagint>(hi, ntags - 1); t++) {
+    const int kl = slot(t), kr = kl + 1;
+    const double d = slot_u(n, kl) - slot_u(n, kr) - gap;
+    const double rate = wve[kl] - wve[kr];
+    const int edge = t < lo ? (slot_wall(kl) ? 0 : 1) : (t + 1 > hi && !slot_wall(kr) ? 2 : 0);
+    double F = 0.0, Fv = 0.0;
+    if (closed[wi[kl]] != 0.0) {
+      F = closed_force(t, d);
+      Fv = F;
+      if (in_band(t, d)) {
+        if (edge) out.band |= edge;
+        else Fv = kick_force(t, slot_u(c, kl) - slot_u(c, kr) - gap, d);
+      }
+      if (damping != 0.0) {
+        F += damping * rate;
+        Fv += damping * rate;
+        if (slot_mine(kl)) out.power += damping * rate * rate;
+      }
+    }
+    if (edge == 1) out.f_left = F;
+    else if (edge == 2) out.f_right = F;
+    if (t >= lo) {
+      finish_bead(n, kl, f_l, F, fv_l, Fv, h);
+      out.power += bead_power(kl, wve[kl]);
+    }
+    f_l = F;
+    fv_l = Fv;
+  }
+  if (hi == ntags) {    // the last bead of a chain without walls: no contact on its right
+    finish_bead(n, slot(hi), f_l, 0.0, fv_l, 0.0, h);
+    out.power += bead_power(slot(hi), wve[slot(hi)]);
+  }
+  for (tagint t : {lo - 1, hi + 1})    // the neighbours: on their parabolas
+    if (t >= 1 && t <= ntags && !is_wall(t)) {
+      const int k = slot(t);
+      wv[n][k] = wve[k];
+      wa[n][k] = wa[c][k];
+    }
+  return out;
+}
+
+// Earliest root te among contacts jl .. jr over the sub-step from copy c (its end in 1 - c),
+// and the contacts switching with it (root within tol of te, in chain order) into sw; returns
+// their number (0: none, te unchanged)
+int FixMdgranChain::locate_window_events(int c, double h, double tol, tagint jl, tagint jr,
+                                         std::vector<tagint> &sw, double &te)
+{
+  const int n = 1 - c;
+  std::vector<double> &root = wroot;
+  root.assign(jr - jl + 1, -1.0);
+  double first = -1.0;
+  for (tagint t = jl; t <= jr; t++) {
+    const int kl = slot(t), kr = kl + 1;
+    const double s = event_root(closed[wi[kl]] != 0.0, off_of(t),
+                                slot_u(c, kl) - slot_u(c, kr) - gap, wv[c][kl] - wv[c][kr],
+                                wa[c][kl] - wa[c][kr], slot_u(n, kl) - slot_u(n, kr) - gap, h);
+    root[t - jl] = s;
+    if (s >= 0.0 && (first < 0.0 || s < first)) first = s;
+  }
+  sw.clear();
+  if (first < 0.0) return 0;
+  for (tagint t = jl; t <= jr; t++)
+    if (root[t - jl] >= 0.0 && root[t - jl] <= first + tol) sw.push_back(t);
+  te = first;
+  return (int) sw.size();
+}
+
+// Switch contact t at time `time` in copy c: the hysteresis loss V(delta) on opening, the
+// event (logged once the step's windows are final), the change of force on its two beads'
+// accelerations; returns the change of this rank's damping power.  The chatter guard: more
+// than MAX_SWITCHES switches of one contact at one instant stop the run.
+double FixMdgranChain::window_switch(int c, tagint t, double time)
+{
+  const int kl = slot(t), kr = kl + 1, l = wi[kl], mine = slot_mine(kl);
+  const double d = slot_u(c, kl) - slot_u(c, kr) - gap;
+  const double r = wv[c][kl] - wv[c][kr];
+  double f_old = 0.0, f_new = 0.0, dp = 0.0;
+  if (closed[l] != 0.0) {
+    f_old = closed_force(t, d);
+    if (damping != 0.0) {
+      f_old += damping * r;
+      if (mine) dp -= damping * r * r;
+    }
+    closed[l] = 0.0;
+    pending.push_back({l, mine, 0, t, time, mixed ? mixed_energy(t, d) : law_energy(d)});
+  } else {
+    closed[l] = 1.0;
+    pending.push_back({l, mine, 1, t, time, 0.0});
+    f_new = closed_force(t, d);
+    if (damping != 0.0) {
+      f_new += damping * r;
+      if (mine) dp += damping * r * r;
+    }
+  }
+  const double df = f_new - f_old;
+  if (!slot_wall(kl)) wa[c][kl] -= mixed ? df * m_inv_mass[t] : df;
+  if (!slot_wall(kr)) wa[c][kr] += mixed ? df * m_inv_mass[t + 1] : df;
+  if (std::fabs(time - chat_time) > SIMULTANEOUS * (1.0 + std::fabs(time))) {
+    chat_time = time;
+    chat.clear();
+  }
+  auto it = std::find_if(chat.begin(), chat.end(), [&](const auto &e) { return e.first == t; });
+  if (it == chat.end()) chat.push_back({t, 1});
+  else if (++it->second > MAX_SWITCHES)
+    error->one(FLERR, "contact {} chatters at t = {:.12g}: it switches state more than {} times "
+               "at one instant", contact_number(t), time, MAX_SWITCHES);
+  return dp;
+}
+
+// Switch the located contacts sw at `time` in copy c, then switch again at once each one on or
+// over its switching point and moving outward (g <= 0, g' < 0), or beyond it by more than
+// STATE_TOL (the reference's rule), until none is; returns the change of the damping power
+double FixMdgranChain::window_settle(int c, const std::vector<tagint> &sw, double time)
+{
+  double dp = 0.0;
+  for (tagint t : sw) dp += window_switch(c, t, time);
+  for (int moved = 1; moved;) {
+    moved = 0;
+    for (tagint t : sw) {
+      const int kl = slot(t), kr = kl + 1;
+      const double d = slot_u(c, kl) - slot_u(c, kr) - gap;
+      const double r = wv[c][kl] - wv[c][kr];
+      const int cl = closed[wi[kl]] != 0.0;
+      const double g = cl ? d - off_of(t) : -d, gd = cl ? r : -r;
+      if (g < -STATE_TOL || (g <= 0.0 && gd < 0.0)) {
+        dp += window_switch(c, t, time);
+        moved = 1;
+      }
+    }
+  }
+  return dp;
+}
+
+// (F, Fv) of contact t at the end of the pass of length h from the step's start (copy 2), by the
+// pass's operations (the neighbour's other contact, which no window steps)
+void FixMdgranChain::pass_force(tagint t, double h, double &F, double &Fv) const
+{
+  F = Fv = 0.0;
+  const int kl = slot(t), kr = kl + 1;
+  if (closed[wi[kl]] == 0.0) return;
+  double xl, vhl, vel, xr, vhr, ver;
+  predict(2, kl, h, xl, vhl, vel);
+  predict(2, kr, h, xr, vhr, ver);
+  const double ul = slot_wall(kl) ? 0.0 : xl - wx0[kl], ur = slot_wall(kr) ? 0.0 : xr - wx0[kr];
+  const double d = ul - ur - gap, rate = vel - ver;
+  F = closed_force(t, d);
+  Fv = F;
+  if (in_band(t, d)) Fv = kick_force(t, slot_u(2, kl) - slot_u(2, kr) - gap, d);
+  if (damping != 0.0) {
+    F += damping * rate;
+    Fv += damping * rate;
+  }
+}
+
+// Neighbour b of a window after the step h: its end acceleration and velocity from the
+// window's end force f_edge on the contact they share and the pass's force on its other
+// contact, its velocity given `impulse`, the window's impulse on the shared contact minus the
+// step's trapezoid (equal and opposite impulses on the contact's two beads: momentum kept).
+// window_left: the window is on b's left (the shared contact pushes b by +F).
+void FixMdgranChain::finish_neighbour(tagint b, double h, double f_edge, double impulse,
+                                      int window_left)
+{
+  const int k = slot(b);
+  double x, vh, ve, fo = 0.0, fvo = 0.0, a, av;
+  predict(2, k, h, x, vh, ve);
+  double fl, fr, fvl, fvr, dj;
+  if (window_left) {
+    if (b <= ntags - 1) pass_force(b, h, fo, fvo);
+    fl = fvl = f_edge;
+    fr = fo;
+    fvr = fvo;
+    dj = impulse;
+  } else {
+    if (b - 1 >= 1) pass_force(b - 1, h, fo, fvo);
+    fl = fo;
+    fvl = fvo;
+    fr = fvr = f_edge;
+    dj = -impulse;
+  }
+  const double ub = x - wx0[k];
+  if (extended) bead_acc<true>(wi[k], fl, fr, fvl, fvr, ub, ve, k1, k3, a, av);
+  else bead_acc<false>(wi[k], fl, fr, fvl, fvr, ub, ve, k1, k3, a, av);
+  const double v1 = vh + 0.5 * h * av + dj * (mixed ? m_inv_mass[b] : 1.0);
+  if (slot_mine(k)) wout.push_back({wi[k], x, v1, a});
+}
+
+// Step window lo .. hi from the step's start (t0) through its events to t0 + dt, as the whole
+// chain would be stepped (window_pass to the earliest root te of its contacts, which switch
+// there, then the rest of the step in the new states, repeated); its owned beads' and
+// neighbours' end states go into wout.  Returns nonzero (1 left, 2 right, 3 both; nothing
+// written, switches pending) when an edge contact switches in the step or is closed in the
+// mean-force band: the window must take in that neighbour.  Else `viscous` and `work` are what
+// its sub-steps change in the step's trapezoids of the damping power and of the excitations'
+// power, `power` what they change in its end power (this rank's shares).
+int FixMdgranChain::resolve_window(tagint lo, tagint hi, double t0, double dt,
+                                   double &viscous, double &power, double &work)
+{
+  load_window(lo, hi);
+  const tagint jl = std::max<tagint>(lo - 1, 1), jr = std::min<tagint>(hi, ntags - 1);
+  const tagint edge_l = lo - 1 >= 1 && !is_wall(lo - 1) ? lo - 1 : 0;    // 0: none
+  const tagint edge_r = hi + 1 <= ntags && !is_wall(hi + 1) ? hi : 0;
+  set_drive_time(t0);
+  const double p_start = window_power(2, lo, hi);
+  const double e_start = driven ? window_external(2, lo, hi) : 0.0;
+  const double f0_l = start_force(2, edge_l), f0_r = start_force(2, edge_r);
+  double p_state = p_start, e_state = e_start, fs_l = f0_l, fs_r = f0_r, j_l = 0.0, j_r = 0.0;
+  const double tol = SIMULTANEOUS * (1.0 + std::fabs(t0));
+  double done = 0.0, h = dt, visc = 0.0, w_sum = 0.0, p_pass = 0.0;
+  int c = 0, redo = 0, nsub = 0, first = 1;
+  chat.clear();
+  chat_time = -1.0;
+  for (;;) {
+    const WinPass wp = window_pass(c, h, t0 + done + h, lo, hi);
+    if (first) p_pass = wp.power;    // the window's share of the pass's power
+    first = 0;
+    if (wp.band) return wp.band;
+    int ns = redo, last = 0;
+    double te = h;
+    if (redo == 0) {
+      ns = locate_window_events(c, h, tol, jl, jr, wswitch, te);
+      last = ns == 0 || te >= h - tol;
+    }
+    int grow = 0;    // an edge contact switches: take that neighbour in
+    if (ns > 0)
+      for (tagint t : wswitch) grow |= (t == edge_l ? 1 : 0) | (t == edge_r ? 2 : 0);
+    if (grow) return grow;
+    if (last || redo > 0) {    // keep this sub-step
+      visc += 0.5 * h * (p_state + wp.power);
+      if (driven) {
+        const double e1 = window_external(1 - c, lo, hi);    // at t0 + done + h (window_pass)
+        w_sum += 0.5 * h * (e_state + e1);
+        e_state = e1;
+      }
+      j_l += 0.5 * h * (fs_l + wp.f_left);
+      j_r += 0.5 * h * (fs_r + wp.f_right);
+      p_state = wp.power;
+      fs_l = wp.f_left;
+      fs_r = wp.f_right;
+      c = 1 - c;
+    }
+    if (ns == 0) break;
+    if (redo == 0 && !last && te > 0.0) {    // step again, up to the event
+      redo = ns;
+      h = te;
+      continue;
+    }
+    const double tev = last ? t0 + dt : t0 + done + te;
+    p_state += window_settle(c, wswitch, tev);
+    if (++nsub > MAX_SUBSTEPS)
+      error->one(FLERR, "more than {} events in one step at t = {:.12g}", MAX_SUBSTEPS, tev);
+    if (last) break;
+    done += te;
+    h = dt - done;
+    redo = 0;
+  }
+  for (tagint t = lo; t <= hi; t++) {
+    const int k = slot(t);
+    if (slot_mine(k)) wout.push_back({wi[k], wx[c][k], wv[c][k], wa[c][k]});
+  }
+  set_drive_time(t0 + dt);
+  // the neighbours across closed edges (an open edge leaves the pass's numbers: window_writes)
+  if (edge_l && closed[wi[slot(edge_l)]] != 0.0)
+    finish_neighbour(lo - 1, dt, fs_l, j_l - 0.5 * dt * (f0_l + fs_l), 0);
+  if (edge_r && closed[wi[slot(edge_r)]] != 0.0)
+    finish_neighbour(hi + 1, dt, fs_r, j_r - 0.5 * dt * (f0_r + fs_r), 1);
+  viscous = visc - 0.5 * dt * (p_start + p_pass);
+  power = p_state - p_pass;
+  work = w_sum - 0.5 * dt * (e_start + e_state);
+  return 0;
+}
+
+// Undo the switches logged since `mark` (latest first): the contacts' states back
+void FixMdgranChain::undo_pending(size_t mark)
+{
+  while (pending.size() > mark) {
+    const Pending &e = pending.back();
+    closed[e.l] = closed[e.l] != 0.0 ? 0.0 : 1.0;
+    pending.pop_back();
+  }
+}
+
+// Window k widened by a bead on the side(s) `grow` asks (1 left, 2 right), joined with the
+// windows after it that it comes within two beads of
+void FixMdgranChain::widen(size_t k, int grow)
+{
+  if (grow & 1) wins[k].lo -= 1;
+  if (grow & 2) wins[k].hi += 1;
+  while (k + 1 < wins.size() && wins[k + 1].lo <= wins[k].hi + 2) {
+    wins[k].hi = std::max(wins[k].hi, wins[k + 1].hi);
+    wins.erase(wins.begin() + (long) k + 1);
+  }
+}
+
+// The events of the step from t0 whose pass has just run, each window of them stepped alone
+// in chain order (find_windows, resolve_window).  A window that must take in a neighbour is
+// undone, widened and stepped again; one that comes within two beads of the window before it
+// is joined with it, and the step's windows are all stepped again (rare).  Then the switches
+// are logged, in time order (simultaneous ones by contact).  Returns this rank's changes to
+// the step's trapezoids of the damping and excitation powers and to its end damping power.
+void FixMdgranChain::local_events(double t0, double dt, double &viscous, double &power,
+                                  double &work)
+{
+  find_windows(dt);
+  pending.clear();
+  size_t k = 0;
+  while (k < wins.size()) {
+    const tagint lo = wins[k].lo, hi = wins[k].hi;
+    if (comm->nprocs > 1) {
+      const int mine = window_writes_owned(lo, hi);
+      if (mine) check_window_ranks(lo, hi);
+      if (!window_visible(lo, hi)) {    // only at the ghosts' far end: not this rank's
+        if (mine)
+          error->one(FLERR, "fix mdgran/chain: the event window of atoms {}..{} at step {} "
+                     "reaches beyond the ghosts (raise comm_modify cutoff)", lo, hi,
+                     update->ntimestep);
+        wins.erase(wins.begin() + (long) k);
+        continue;
+      }
+    }
+    const size_t mark = pending.size(), outs = wout.size();
+    double dv, dp, dw;
+    const int grow = resolve_window(lo, hi, t0, dt, dv, dp, dw);
+    if (grow == 0) {
+      viscous += dv;
+      power += dp;
+      work += dw;
+      k++;
+      continue;
+    }
+    undo_pending(mark);
+    wout.resize(outs);
+    widen(k, grow);
+    if (k > 0 && wins[k].lo <= wins[k - 1].hi + 2) {    // reaches a window already stepped
+      wins[k - 1].hi = wins[k].hi;
+      wins.erase(wins.begin() + (long) k);
+      widen(k - 1, 0);
+      undo_pending(0);
+      wout.clear();
+      viscous = power = work = 0.0;
+      k = 0;
+    }
+  }
+  std::stable_sort(pending.begin(), pending.end(), [](const Pending &a, const Pending &b) {
+    return a.time != b.time ? a.time < b.time : a.left < b.left;
+  });
+  for (const Pending &e : pending)
+    if (e.own) add_event(e.left, e.kind, e.time, e.lost);
+  pending.clear();
+}
+
+// The windows' end states of the owned atoms in place of the pass's: x, v, the acceleration
+// (the next step's a0) and LAMMPS's force array, which accelerate gave the pass's
+void FixMdgranChain::commit_windows()
+{
+  double *x = flat(atom->x), *v = flat(atom->v), *f = flat(atom->f);
+  for (const Out &o : wout) {
+    x[3 * o.i] = o.x;
+    v[3 * o.i] = o.v;
+    f[3 * o.i] = (f[3 * o.i] - aprev[o.i]) + o.a;
+    aprev[o.i] = o.a;
+  }
 }
 
 // ---- output -------------------------------------------------------------------------------

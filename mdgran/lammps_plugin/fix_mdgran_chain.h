@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace LAMMPS_NS {
@@ -109,7 +110,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double mixed_force(tagint jt, double d, int located_law) const;
   double mixed_energy(tagint jt, double d) const;
   struct Con;
-  double mixed_located(const Con &c, double d, double h, double &F, double &Fv);
+  double mixed_located(const Con &c, double d, double h, double &F, double &Fv) const;
   inline double off_of(tagint jt) const { return mixed ? m_delta_off[jt] : delta_off; }
 
   // ---- excitations ("pulse TAG A T t0", "base FILE"; mdgran/drive.py) -----------------------
@@ -132,8 +133,8 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double *closed;                           // 1.0 closed, 0.0 open (contact tag -> tag + 1)
   double *dprev;                            // that contact's delta at the previous step
   double *aprev;                            // the atom's acceleration at the previous step
-                                            // (located: at the start of the (sub)step)
-  double *xs, *vs;                          // located: x and v at the start of the (sub)step
+                                            // (located: at the start of the step)
+  double *xs, *vs;                          // located: x and v at the start of the step
   // scratch
   double *fcon;                             // force of the contact to the right
   double *u, *w;                            // displacement, velocity estimate
@@ -155,7 +156,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   struct Event {
     bigint step;
     tagint left;                            // tag of the contact's left atom
-    int kind;                               // 1 close, -1 open
+    int kind;                               // 1 close, 0 open
     double time;
   };
   std::vector<Event> ev_local;              // since the last sync, this rank
@@ -167,9 +168,8 @@ class FixMdgranChain : public Fix, public MdgranLaw {
     int l, r, own;                          // local left and right atom; own: left is owned
   };
   std::vector<Con> cons;                    // contacts this rank evaluates
-  std::vector<int> flagged;                 // indices into cons: a possible event in the pass
-  std::vector<double> roots;                // their first roots
-  std::vector<int> switching;               // indices into cons: switch at the event
+  std::vector<Con> gcons;                   // contacts between two ghosts (event windows)
+  std::vector<Con> flagged;                 // contacts with a possible event in the pass
   std::vector<int> runs;                    // owned atoms it moves, [begin, end) pairs
   std::vector<int> still;                   // the other owned atoms (walls, outside the group)
   std::vector<int> wall_atoms;              // walls among the owned and ghost atoms
@@ -180,20 +180,88 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double located_pass(double h);
   template <bool MIX> double located_pass_t(double h);
   template <bool EXT> void accelerate_t(double h, int last);
-  void drift(double h, int start);
+  template <bool EXT>
+  inline void bead_acc(int i, double fl, double fr, double fvl, double fvr, double ui,
+                       double wi, double k1_, double k3_, double &a, double &av) const;
+  void drift(double h);
   void accelerate(double h, int last);
   void located_step();
   void located_setup();
   double first_root(const Con &c, double h) const;
-  double earliest_event(double h, double tol);
   void switch_contact(const Con &c, double time);
   void settle(std::vector<int> &list, double time);
   void add_visc(double dv);
-  void add_event(const Con &c, int kind, double time, double lost);
-  inline double ustart(int i) const;         // displacement at the substep start (walls: 0)
-  inline double vstart(int i) const;         // velocity at the substep start (walls: 0)
-  inline double astart(int i) const;         // acceleration at the substep start (walls: 0)
+  void add_event(tagint left, int kind, double time, double lost);
+  inline double ustart(int i) const;         // displacement at the step start (walls: 0)
+  inline double vstart(int i) const;         // velocity at the step start (walls: 0)
+  inline double astart(int i) const;         // acceleration at the step start (walls: 0)
   inline int moves(int i) const;             // in the fix group and not a wall
+  double closed_force(tagint t, double d) const;    // f of closed contact t (left tag) at d
+  int in_band(tagint t, double d) const;    // mean-force kick band near snap-off
+  double kick_force(tagint t, double d0, double d) const;    // 2 f_mean(d0, d) - f(d0)
+
+  // ---- event windows (located_step; as the fast backend's local_events) -------------------
+  // tags: a window is the beads lo .. hi; its neighbours lo - 1 and hi + 1 move on their
+  // parabolas; slots hold the atoms with tags base .. base + n - 1 (lo - 2 .. hi + 2)
+  struct Window {
+    tagint lo, hi;
+  };
+  struct WinPass {                          // what a window sub-step found
+    double power, f_left, f_right;          // this rank's damping power; edge contact forces
+    int band;                               // edge contact closed in the kick band (1 l, 2 r)
+  };
+  struct Pending {                          // a switch in a window, logged once all are final
+    int l, own, kind;                       // left atom, its owner is this rank, 1 close 0 open
+    tagint left;
+    double time, lost;
+  };
+  struct Out {                              // a window's end state of an owned atom
+    int i;
+    double x, v, a;
+  };
+  std::vector<Window> wins;
+  std::vector<Pending> pending;
+  std::vector<Out> wout;
+  tagint wbase;                             // tag of slot 0
+  std::vector<int> wi;                      // slot: local index (-1: beyond the chain)
+  std::vector<double> wx0, wve;             // slot: x0; v_est of the sub-step in progress
+  std::vector<double> wx[3], wv[3], wa[3];  // slot states: copies 0, 1 and the step start (2)
+  std::vector<tagint> wswitch;              // contacts switching at a window's event
+  std::vector<double> wroot;                // their roots (scratch)
+  std::vector<std::pair<tagint, int>> chat; // chatter guard: switches per contact at chat_time
+  double chat_time;
+  tagint own_lo, own_hi, known_lo, known_hi;    // tags owned, and held contiguously around them
+  std::vector<tagint> rank_ranges;          // those four of every rank (several ranks)
+  void share_ranges();
+  int window_visible(tagint lo, tagint hi) const;
+  void window_writes(tagint lo, tagint hi, tagint &a, tagint &b) const;
+  int window_writes_owned(tagint lo, tagint hi) const;
+  void check_window_ranks(tagint lo, tagint hi) const;
+  void find_windows(double h);
+  void load_window(tagint lo, tagint hi);
+  inline int slot(tagint t) const { return (int) (t - wbase); }
+  inline int slot_wall(int k) const { return is_wall(wbase + k); }
+  inline double slot_u(int c, int k) const { return slot_wall(k) ? 0.0 : wx[c][k] - wx0[k]; }
+  inline int slot_mine(int k) const;        // slot k's atom is owned here
+  double bead_power(int k, double ve) const;
+  double window_power(int c, tagint lo, tagint hi) const;
+  double window_external(int c, tagint lo, tagint hi) const;
+  double start_force(int c, tagint t) const;
+  void predict(int c, int k, double h, double &x, double &vh, double &ve) const;
+  WinPass window_pass(int c, double h, double t1, tagint lo, tagint hi);
+  void finish_bead(int n, int k, double fl, double fr, double fvl, double fvr, double h);
+  int locate_window_events(int c, double h, double tol, tagint jl, tagint jr,
+                           std::vector<tagint> &sw, double &te);
+  double window_switch(int c, tagint t, double time);
+  double window_settle(int c, const std::vector<tagint> &sw, double time);
+  void pass_force(tagint t, double h, double &F, double &Fv) const;
+  void finish_neighbour(tagint b, double h, double f_edge, double impulse, int window_left);
+  int resolve_window(tagint lo, tagint hi, double t0, double dt, double &viscous,
+                     double &power, double &work);
+  void undo_pending(size_t mark);
+  void widen(size_t k, int grow);
+  void local_events(double t0, double dt, double &viscous, double &power, double &work);
+  void commit_windows();
   // first element of a LAMMPS per-atom array of rows (x, v, f: one block, 3 per atom)
   static double *flat(double **a) { return a ? a[0] : nullptr; }
 
