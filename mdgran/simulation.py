@@ -135,8 +135,11 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     the frames kept
     in memory (``keep``: x and v, and the copies made for the trajectory, plus the frame's
     time and ledger, 64 bytes); on disk x, v (and positions, and the per-contact series), the
-    six observables and the step and time they share (positions: a time of their own)."""
+    six observables and the step and time they share (positions: a time of their own), the
+    series of more than :data:`~mdgran.rest_blocks.BLOCK` beads counted at one block a frame
+    (the writer leaves out the blocks at rest)."""
     from .reporters import buffer_frames, stored_bead_count
+    from .rest_blocks import BLOCK
 
     n = int(scene.data["chain"]["n"])
     ns = stored_bead_count(n, int(scene.data["output"].get("bead_stride", 1)))  # stored beads
@@ -148,7 +151,8 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     block = min(frames, buffer_frames(8.0 * ns * (2 + pos + con)))
     memory = 8.0 * n * 10 + 8.0 * ns * block * (4 + pos + con) + (
         frames * (4 * 8.0 * n + 64.0) if keep else 0)
-    disk = frames * (8.0 * ns * (2 + pos + con) + 16.0 * (1 + (pos > 0)) + 6 * 8.0)
+    written = min(ns, BLOCK)  # a long series: at least one column block a frame (rest_blocks)
+    disk = frames * (8.0 * (written * (2 + con) + ns * pos) + 16.0 * (1 + (pos > 0)) + 6 * 8.0)
     return {"n": n, "frames": frames, "memory": memory, "disk": disk}
 
 

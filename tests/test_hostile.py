@@ -46,8 +46,9 @@ REFUSED_VALUES = [
     (["--set", "material.diameter=1e300"], "material.diameter"),  # OverflowError
     (["--set", "chain.n=1000000000"], "chain.n"),  # MemoryError after the run started
     (["--set", "chain.n=1000000000000"], "chain.n"),
-    # 1e5 beads x 9.9e7 frames: 3.8e5 GiB on disk, more than any disk holds (8e7 frames of
-    # micro-star, as before, need 55 GB: refused only where less is free)
+    # 1e5 beads x 9.9e7 frames: at least 6.4e3 GiB on disk (one block of 4096 beads a frame
+    # of each long series), more than any disk holds (8e7 frames of micro-star need 55 GB:
+    # refused only where less is free)
     (["--backend", "fast", "--set", "chain.n=100000", "--set", "run.duration=9.9e5", "--set",
       "run.output_interval=0.01", "--set", "run.dt=0.01"], "run.output_interval"),
     (["--set", "contact.law=jkr", "--set", "contact.lambda=1.5"], "contact.lambda"),
