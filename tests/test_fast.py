@@ -275,3 +275,33 @@ def test_flag_indices_name_the_fields_of_flags():
     booleans); each index constant is its field's position in :class:`Flags`."""
     for k, name in enumerate(fk.Flags._fields):
         assert getattr(fk, name.upper()) == k, name
+
+
+def test_a_call_of_the_loop_keeps_to_its_step_budget(monkeypatch):
+    """A signal is honoured between calls of the compiled loop, so a call takes at most its
+    step budget (about CALL_SECONDS at the last call's pace; events can make a step cost many
+    nominal bead-steps), stopping inside a frame if it must: an active chain run with a budget
+    of a few steps is bitwise the run in whole frames, events included."""
+    from mdgran.backends import fast as fast_backend
+
+    over = [("chain.n", 3000), ("thermal.temperature", 2.0), ("thermal.seed", 1),
+            ("run.duration", 4.0)]  # 8 frames a call, 5 calls
+    whole = run(load_scene("micro-star", over), "fast", threads=1)
+    calls = []
+    real_call = fast_backend.FastBackend._call
+
+    def counted(self, kernel_args, i, nframes):
+        budget = self._step_budget()
+        step0 = int(self.counters["step"])
+        out = real_call(self, kernel_args, i, nframes)
+        calls.append((budget, int(self.counters["step"]) - step0, out[1]))
+        return out
+
+    monkeypatch.setattr(fast_backend, "CALL_SECONDS", 1e-6)
+    monkeypatch.setattr(fast_backend.FastBackend, "_call", counted)
+    cut = run(load_scene("micro-star", over), "fast", threads=1)
+    assert all(steps <= budget for budget, steps, _ in calls[1:])
+    assert sum(done == 0 for _, _, done in calls) > 10  # calls that ended inside a frame
+    for name in ("x", "v", "closed", "ev_time", "ev_contact", "ev_kind"):
+        assert np.array_equal(getattr(whole.trajectory, name), getattr(cut.trajectory, name))
+    assert whole.stats["events"] == cut.stats["events"] > 50

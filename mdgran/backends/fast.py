@@ -58,6 +58,10 @@ EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
 #: frames of 10 steps per call, handed over as one block); a checkpoint falls between calls
 BLOCK_BEAD_STEPS = 1_000_000
+#: ... and at most about this many seconds a call (its step budget, from the time the calls
+#: so far took per step): an interrupt or a SIGTERM is honoured between calls, and events can
+#: make a step of an active chain cost many nominal bead-steps
+CALL_SECONDS = 0.5
 
 
 #: distinct pair laws whose force tables the fast backend holds (unlike beads); more (random
@@ -247,6 +251,7 @@ class FastBackend(Backend):
             "power")}
         self._pending: list = []
         self._last = None
+        self._step_seconds = None  # seconds per step of the last call (its step budget)
 
     def _current(self) -> fk.Beads:
         """The beads' current state (views of the kernel's buffer)."""
@@ -273,7 +278,7 @@ class FastBackend(Backend):
 
     def _check(self):
         status = int(self.counters["status"])
-        if status in (fk.OK, fk.EVENTS_FULL):
+        if status in (fk.OK, fk.EVENTS_FULL, fk.STEP_BUDGET):
             self.counters["status"] = fk.OK
             return
         t = float(self.counters["bad_time"])
@@ -417,6 +422,8 @@ class FastBackend(Backend):
         frames done, seconds)``.  It may run on the backend's own thread (:meth:`_blocks_from`):
         it touches the kernel's buffers, counters and log and the new block alone."""
         block = fk.new_block(nframes, self.model.n, self.model.n_contacts, self._rest_x)
+        self.counters["budget"] = self._step_budget()
+        step0 = int(self.counters["step"])
         k0 = _time.perf_counter()
         if self.flags.threaded:
             numba.set_num_threads(self.threads)
@@ -424,7 +431,18 @@ class FastBackend(Backend):
                             self.dt)
         if self.flags.threaded:
             note_threads_ran()
-        return block, done, _time.perf_counter() - k0
+        seconds = _time.perf_counter() - k0
+        steps = int(self.counters["step"]) - step0
+        if steps > 0:  # a first call that compiled makes the next one short, no more
+            self._step_seconds = seconds / steps
+        return block, done, seconds
+
+    def _step_budget(self) -> int:
+        """Steps the next call may take: about :data:`CALL_SECONDS` at the time per step of
+        the last call (no limit on the first)."""
+        if self._step_seconds is None:
+            return 0
+        return max(1, int(CALL_SECONDS / max(self._step_seconds, 1e-12)))
 
     def _blocks_from(self, i, out_times, kernel_args):
         """Frames ``i ..`` to the end: the kernel runs a block of frames per call (about
@@ -471,7 +489,8 @@ class FastBackend(Backend):
                 evs, ends, lo = self._block_events(block, done)
                 if not done:
                     self._pending = evs
-                if status[0] == fk.EVENTS_FULL:  # the unfinished frame's events so far
+                if status[0] in (fk.EVENTS_FULL, fk.STEP_BUDGET):  # the unfinished frame's
+                    # events so far
                     count = int(events[0])
                     self._pending += self._events(lo, count)
                     lo = count

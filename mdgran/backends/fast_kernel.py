@@ -100,6 +100,7 @@ from ..contact_scalar import SchwarzConstants, law_energy, law_force, schwarz_me
 
 # status codes (counters.status)
 OK, OUT_OF_TABLE, CHATTER, TOO_MANY_SUBSTEPS, EVENTS_FULL, EVENT_OVERFLOW = 0, 1, 2, 3, 4, 5
+STEP_BUDGET = 6  # a call stopped inside a frame at its step budget (counters.budget)
 
 MAX_SWITCHES = 4  # switches of one contact at one instant before the run stops (chatter)
 MAX_SUBSTEPS = 10000  # event splits in one step
@@ -366,6 +367,7 @@ COUNTERS = np.dtype([
     ("pass_lo", np.int64),  # and the contacts it runs in them: pass_lo .. pass_hi - 1
     ("pass_hi", np.int64),
     ("bead_steps", np.int64),  # beads stepped so far (passes over the segments run)
+    ("budget", np.int64),  # steps one call of the loop may take (0: no limit)
     ("d_viscous", np.float64),  # D_viscous
     ("d_hysteresis", np.float64),  # D_hysteresis
     ("power", np.float64),  # damping power at the current state
@@ -1719,14 +1721,22 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
     """Frames ``first .. first + nframes - 1`` (frame ``i`` ends at step ``i * spf``), each
     state at a frame's end copied into ``block`` row ``i - first`` (the beads of the activity
     front only, once it is known: ``block`` holds the beads at rest already, :func:`new_block`;
-    every contact's state); returns the frames done
+    every contact's state); at most ``counters.budget`` steps (when > 0; then
+    ``counters.status = STEP_BUDGET`` inside a frame); returns the frames done
     (fewer on an error or a half-full event log: ``counters.status``; the steps of the
     unfinished frame done so far are kept, and a next call continues them)."""
     counters = ks.counters[0]
+    step0 = counters.step
     for k in range(nframes):
-        advance_steps(flags, params, buffers, ks, (first + k) * spf - counters.step, dt,
-                      run_segments)
+        end = (first + k) * spf  # the frame's last step
+        todo = end - counters.step
+        if counters.budget > 0:
+            todo = min(todo, counters.budget - (counters.step - step0))
+        advance_steps(flags, params, buffers, ks, todo, dt, run_segments)
         if counters.status != OK:
+            return k
+        if counters.step < end:  # the budget ran out inside the frame
+            counters.status = STEP_BUDGET
             return k
         c = counters.current
         lo, hi = 0, buffers.x.shape[1] - 1  # the beads not at rest: the front once known
