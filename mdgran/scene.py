@@ -524,6 +524,14 @@ class Scene:
         return self.impulse_energy + self.drive.energy(mass, g, sub["k1"], sub["k3"],
                                                        float(self.data["run"]["duration"]))
 
+    def own_copy(self) -> "Scene":
+        """An independent copy, its data resolved and checked again (what a run keeps: a later
+        change to this scene's ``data`` does not reach the run or its record, and a change
+        made since this scene was resolved is checked as a scene file is; a bad value is a
+        :class:`SceneError`)."""
+        return Scene(self.name, resolve(copy.deepcopy(self.data)), copy.deepcopy(self.given),
+                     copy.deepcopy(self.sources))
+
     def with_overrides(self, overrides) -> "Scene":
         """This scene with ``(key, value)`` overrides: the same keys and rules as
         :func:`load_scene`'s (a value the scene derived, such as lambda from the material, is

@@ -249,7 +249,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     removes the partial output and re-raises, unless ``checkpoint_every`` (seconds) is set:
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
     in-memory trajectory then holds only the resumed frames; the file holds all).  A run whose
-    frames cannot fit in memory or on disk is refused first (:func:`check_resources`).
+    frames cannot fit in memory or on disk is refused first (:func:`check_resources`).  The run
+    works on its own copy of ``scene``, checked again (:meth:`~mdgran.scene.Scene.own_copy`).
 
     ``collective`` (default True): under ``mpiexec`` every rank runs this same call (LAMMPS
     splits the chain over them), so rank 0 alone writes ``out`` and shows progress.  False: this
@@ -260,6 +261,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
             checkpoint_every, (int, float)) or not 0 <= checkpoint_every < math.inf):
         raise SceneError("checkpoint_every", "must be a number of seconds >= 0, or None (no "
                          f"checkpoints), not {checkpoint_every!r}")
+    scene = scene.own_copy()  # the run's own: a later change to the caller's is not its
     writes = not collective or mpi_rank() == 0
     check_resources(scene, out if writes else None, keep)
     b = make_backend(scene, backend, **options)

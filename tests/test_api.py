@@ -194,3 +194,21 @@ def test_driver_errors_are_renamed_to_python_parameters():
     assert exc.key == "chain.n, run.output_interval" and str(exc).endswith("at / (out)")
     same = SceneError("chain.n", "must be an integer >= 1, not 0")
     assert _python_names(same) is same
+
+
+def test_a_run_keeps_its_own_scene():
+    """A Scene changed after a run does not change the run's record, and a change that
+    breaks it is refused in one line (it ran into NumPy errors)."""
+    from mdgran.scene import SceneError, load_scene
+
+    sc = load_scene("micro-star", [("run.duration", 2.0)])
+    r1 = mdgran.run(sc, "reference")
+    err1 = r1.trajectory.max_ledger_error
+    sc.data["impulse"]["velocity"] = 5.0
+    r2 = mdgran.run(sc, "reference")
+    assert r1.trajectory.scene.data["impulse"]["velocity"] == 12.0
+    assert r1.trajectory.max_ledger_error == err1
+    assert r2.trajectory.scene.impulse_energy == 12.5 and r1.trajectory.scene.impulse_energy == 72.0
+    sc.data["chain"]["n"] = -3
+    with pytest.raises(SceneError, match="chain.n"):
+        mdgran.run(sc, "reference")
