@@ -440,6 +440,7 @@ def flag_message(exc) -> str:
 
 
 def main(argv=None) -> int:
+    from .backends.base import IntegrationError
     from .scene import SceneError
     from .simulation import BackendUnavailable
 
@@ -455,6 +456,8 @@ def main(argv=None) -> int:
         return _fail(flag_message(exc), 2)
     except BackendUnavailable as exc:
         return _fail(str(exc), 2)
+    except IntegrationError as exc:  # a run failed (mdgran compare: after its report)
+        return _fail(str(exc), 1)
     except KeyboardInterrupt as exc:
         return _fail(f"interrupted ({exc or 'SIGINT'})", exit_status(exc))
     except BrokenPipeError:  # output piped into head & co.

@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from .backends import spec_stem
+from .backends.base import IntegrationError
 from .simulation import run
 
 PREDICTABLE = 1e-2
@@ -228,6 +229,41 @@ def predictability(scene, ref: BackendRuns, series=None) -> dict:
     ftle = float(math.log(amp) / (t[kmax] - t[k1])) if kmax > k1 and amp > 0 else 0.0
     return {"perturbation": PERTURBATION, "difference": d, "time": t,
             "amplification": amp, "ftle": ftle, "t_max_difference": float(t[kmax])}
+
+
+def clear_previous(out: Path, backends):
+    """Remove what an earlier comparison left in ``out`` and this one will not write again: its
+    report, figures and the runs of other backends (``NAME.h5`` of a backend spec), so that
+    a folder never shows a report or a run of another comparison beside this one's."""
+    from .backends import BACKENDS
+
+    mine = {f"{spec_stem(b)}.h5" for b in backends}
+    for path in out.glob("*.h5"):
+        stem = path.stem.split("-")[0]
+        if stem in BACKENDS and path.name not in mine:
+            path.unlink(missing_ok=True)
+    for name in ("report.json", "report.md"):
+        (out / name).unlink(missing_ok=True)
+    for fig in (out / "figures").glob("*.png") if (out / "figures").is_dir() else ():
+        fig.unlink(missing_ok=True)
+
+
+def failed_comparison(scene, backends, runs, name: str, error: str, out_dir):
+    """A backend's run failed: write a report that says which and why, with the runs done so
+    far (``report.json``, ``report.md``; the failed run's file holds its frames so far), then
+    raise :class:`IntegrationError` naming it (exit status 1)."""
+    report = {"scene": scene.name, "backends": list(backends), "passed": False,
+              "failed": {"backend": name, "error": error},
+              "runs": {r.name: {"wall_s": r.wall_s, "status": r.status,
+                                "ledger_error": r.ledger_error,
+                                "ledger_bound": r.ledger_bound} for r in runs}}
+    where = ""
+    if out_dir is not None:
+        from .compare_report import write_failure
+
+        write_failure(Path(out_dir), scene, report)
+        where = f"; report in {Path(out_dir) / 'report.md'}"
+    raise IntegrationError(f"compare {scene.name}: backend {name} failed: {error}{where}")
 
 
 def horizon(time, *errors) -> float:
@@ -416,8 +452,15 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
                    f"{float(scene.data['run']['duration']):g} ({', '.join(backends)}: as "
                    f"given, refined{f', {ensemble} ensemble members' if ensemble else ''}; "
                    f"{backends[0]} perturbed by {PERTURBATION:g})")
-    runs = [run_backend(scene, b, out_dir, progress, ensemble, series, refinements[b])
-            for b in backends]
+    if out_dir is not None:
+        clear_previous(Path(out_dir), backends)
+    runs = []
+    for b in backends:
+        try:
+            runs.append(run_backend(scene, b, out_dir, progress, ensemble, series,
+                                    refinements[b]))
+        except IntegrationError as exc:
+            failed_comparison(scene, backends, runs, b, str(exc), out_dir)
     ref = runs[0]
     pred = predictability(scene, ref, series)
     if series is not None:

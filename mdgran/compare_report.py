@@ -257,3 +257,20 @@ def write_report(out: Path, scene, runs, pred, report, pairs):
     _figures(out, scene, runs, pred, report, pairs)
     _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
     _atomic_write(out / "report.md", _markdown(scene, runs, report))
+
+
+def write_failure(out: Path, scene, report):
+    """The report of a comparison a backend's run failed in (:func:`mdgran.compare.compare`):
+    which backend, why, and the runs done before it."""
+    f = report["failed"]
+    lines = [f"# Comparison of {scene.name}: FAIL", "",
+             f"The run on **{f['backend']}** failed: {f['error']}", "",
+             "Nothing is judged. Its file holds its frames up to the failure (status "
+             "`failed: ...`).", ""]
+    if report["runs"]:
+        lines += ["Runs done before it:", "", "| backend | status | ledger error | bound |",
+                  "|---|---|---|---|"]
+        lines += [f"| {name} | {r['status']} | {r['ledger_error']:.3g} | "
+                  f"{r['ledger_bound']:.3g} |" for name, r in report["runs"].items()]
+    _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
+    _atomic_write(out / "report.md", "\n".join(lines) + "\n")

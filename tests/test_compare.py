@@ -110,3 +110,30 @@ def test_an_unmatched_event_is_excused_only_when_undecidable():
     assert seen == [(2.0, 3, 1, "first", 0.01)]
     ev = compare_events(ta, sa, tb, sb, 10.0, 0.01, lambda *r: True)
     assert ev["disagreement"] is None and ev["undecidable"] == 1
+
+
+def test_a_backend_that_fails_is_named_in_the_report(tmp_path, capsys):
+    """The fast backend leaves its contact table at v0 = 3000 and dt = 0.01: the comparison
+    writes a report saying which backend failed and why, exits 1 with one line (it was a
+    traceback and no report), and clears what an earlier comparison left in the folder (a
+    run of another backend, a figure) but not files of the user's."""
+    from mdgran.cli import main
+
+    out = tmp_path / "cmp"
+    (out / "figures").mkdir(parents=True)
+    for stale in ("lammps.h5", "report.md", "figures/old.png", "mine.h5"):
+        (out / stale).write_text("from before")
+    code = main(["compare", "micro-star", "--backends", "reference,fast", "--set",
+                 "impulse.velocity=3000", "--set", "run.dt=0.01", "--set", "run.duration=1",
+                 "--ensemble", "0", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and "backend fast failed" in err[0]
+    report = json.loads((out / "report.json").read_text())
+    assert report["passed"] is False and report["failed"]["backend"] == "fast"
+    assert "contact table" in report["failed"]["error"]
+    assert report["runs"]["reference"]["status"] == "complete"
+    assert "The run on **fast** failed" in (out / "report.md").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["fast.h5", "figures", "mine.h5",
+                                                     "reference.h5", "report.json",
+                                                     "report.md"]
+    assert not list((out / "figures").iterdir())
