@@ -43,9 +43,11 @@ realizations can be run again with more (same ``eps``) and only the new cases ru
 ``[sweep]`` values there).
 
 Every case writes ``DIR/cases/NNNN.h5`` (the run, atomically) and then ``DIR/cases/NNNN.json``
-(its summary, atomically).  A case counts as done when its JSON exists (and its H5, unless it
-failed), so a sweep that is killed or interrupted and started again redoes only the unfinished
-cases.  ``DIR/sweep.json`` lists the cases and their parameters; ``DIR/summary.json``
+(its summary, atomically).  A case counts as done when its JSON exists, says it did not fail,
+and its H5 exists, so a sweep that is killed or interrupted and started again redoes only the
+unfinished and failed cases.  ``[sweep] scene`` names a built-in scene or a path from the sweep
+file's folder; ``DIR/sweep.json`` records the scene's resolved text's SHA-256, and a case or a
+resume on a scene changed since is refused (the cases would mix two scenes).  ``DIR/sweep.json`` lists the cases and their parameters; ``DIR/summary.json``
 (rewritten at the end of every call) counts the complete cases and lists the others: those
 whose ledger error exceeded their backend's declared bound (status ``ledger-exceeded: ...``)
 and those that failed.
@@ -56,7 +58,7 @@ its JSON and in ``summary.json``, and the sweep goes on: an exception of any kin
 (returned by the worker as a line of text: not every exception pickles), or its worker process
 dying (killed, out of memory, a crash in compiled code): the worker is replaced and the case
 runs again, and a case that killed its worker :data:`WORKER_DEATHS` (2) times is recorded
-failed.  A failed case is not redone when the sweep is run again; delete its JSON to retry it.
+failed.  The same command run again redoes the failed cases (and the unfinished ones).
 Ctrl-C or SIGTERM on the main process stops the sweep at once: queued cases are not started,
 the workers are killed (what they were writing is removed), finished cases stay, the command
 exits with the interrupted status (130; 143 for SIGTERM) and the same command resumes.  Workers
@@ -85,6 +87,7 @@ would deadlock).  Plain ``mpiexec -n K mdgran sweep`` is refused on ranks other 
 """
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import math
@@ -93,7 +96,8 @@ import sys
 import time as _time
 from pathlib import Path
 
-from .scene import SceneError, load_scene, read_toml
+from .scene import SceneError, builtin_scenes, load_scene, read_toml
+from .storage import OutputLock, OutputLocked
 from .signals import interrupting
 
 SWEEP_DIR = Path(__file__).parent / "sweeps"
@@ -163,6 +167,7 @@ def load_sweep(spec: str, extra_overrides=(), small: bool = False,
     scene = head.get("scene")
     if not isinstance(scene, str):
         raise SceneError("sweep.scene", "must name a scene")
+    scene = scene_beside(scene, path)
     backend = head.get("backend", "reference")
     fixed_t = dict(raw.get("fixed", {}))
     grid = dict(raw.get("grid", {}))
@@ -181,13 +186,28 @@ def load_sweep(spec: str, extra_overrides=(), small: bool = False,
         overrides = fixed + list(params.items())
         load_scene(scene, overrides)  # validate every case up front
         cases.append({"index": i, "overrides": overrides, "params": params})
-    out = {"name": path.stem, "scene": scene, "backend": backend, "cases": cases,
+    out = {"name": path.stem, "scene": scene, "scene_sha256": scene_digest(scene),
+           "backend": backend, "cases": cases,
            "description": head.get("description", ""), "axes": list(grid.keys()),
            "small": raw.get("small", {})}
     if n_real > 1:
         out["cases"] = _realization_cases(scene, cases, n_real, eps)
         out["realizations"], out["perturbation"] = n_real, eps
     return out
+
+
+def scene_beside(scene: str, sweep_file: Path) -> str:
+    """A sweep's ``[sweep] scene``: a built-in name as it is, a relative path from the sweep
+    file's folder (not from where the command runs)."""
+    if scene in builtin_scenes() or Path(scene).is_absolute():
+        return scene
+    return str(Path(sweep_file).parent / scene)
+
+
+def scene_digest(scene: str) -> str:
+    """SHA-256 of the sweep's scene resolved (its TOML text, every value the cases start
+    from): a sweep records it, and a case or a resume of a scene changed since is refused."""
+    return hashlib.sha256(load_scene(scene).to_toml().encode("utf-8")).hexdigest()
 
 
 def _realization_cases(scene: str, grid_cases: list, n_real: int, eps: float) -> list:
@@ -243,7 +263,8 @@ def case_summary(result) -> dict:
 
 
 def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
-             comm_self: bool = False, progress_every: float | None = None) -> dict:
+             comm_self: bool = False, progress_every: float | None = None,
+             scene_sha256: str | None = None) -> dict:
     """Run one case (in a worker process); returns its summary.  The run is a run of its own
     (``collective=False``): on an MPI worker rank it writes its ``.h5`` whatever the rank.
     ``comm_self``: the case runs on an MPI worker rank, so a backend that takes a communicator
@@ -251,11 +272,15 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
     LAMMPS instance on it would wait for every rank and deadlock).  ``progress_every``
     (seconds): keep ``cases/NNNN.progress`` holding the case's simulated time while it runs
     (:class:`mdgran.progress.ProgressFile`; the main process reads it for its progress
-    lines)."""
+    lines).  ``scene_sha256``: the sweep's :func:`scene_digest`; a scene changed since the
+    sweep started fails the case (it would run another scene than its sweep's)."""
     from .simulation import run
 
     cases = Path(out_dir) / "cases"
     stem = f"{case['index']:04d}"
+    if scene_sha256 is not None and scene_digest(scene_spec) != scene_sha256:
+        raise SceneError("sweep.scene", f"{scene_spec} changed since the sweep started; "
+                         "restore it, or run the sweep again in a new folder")
     scene = load_scene(scene_spec, [tuple(o) for o in case["overrides"]])
     options = {}
     if comm_self:
@@ -557,18 +582,19 @@ def sweep_summary(results: list) -> dict:
 
 
 def _finished(out_dir: Path, index: int) -> bool:
-    """A case is finished when its JSON exists and, unless it failed, its H5 too (a case whose
-    JSON says it ran but whose H5 is missing, as an older mdgran's MPI sweep left on its
-    worker ranks, is run again)."""
+    """A case is finished when its JSON exists, says it did not fail, and its H5 exists too:
+    a failed case is run again by a rerun (a case that failed for a reason of the moment, such
+    as another sweep on the same folder, must not stay failed), and so is a case whose JSON
+    says it ran but whose H5 is missing (as an older mdgran's MPI sweep left on its worker
+    ranks)."""
     js = out_dir / "cases" / f"{index:04d}.json"
     if not js.exists():
         return False
-    if (out_dir / "cases" / f"{index:04d}.h5").exists():
-        return True
     try:
-        return str(json.loads(js.read_text()).get("status", "")).startswith("failed")
+        status = str(json.loads(js.read_text()).get("status", ""))
     except (ValueError, UnicodeDecodeError, AttributeError):
         return False
+    return not status.startswith("failed") and (out_dir / "cases" / f"{index:04d}.h5").exists()
 
 
 def _extends(before, cases: list) -> bool:
@@ -657,6 +683,27 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
                 before.get("cases"), json.loads(json.dumps(sweep["cases"]))):
             raise SceneError("--out", f"{out} holds another sweep (or the same on backend "
                              f"{before.get('backend')!r}); use a new folder")
+        if before.get("scene_sha256", sweep["scene_sha256"]) != sweep["scene_sha256"]:
+            raise SceneError("--out", f"the scene {sweep['scene']} changed since the sweep in "
+                             f"{out} started (its cases would mix two scenes); restore it or "
+                             "use a new folder")
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = OutputLock(out / "sweep")  # one sweep per folder at a time
+    except OutputLocked as exc:
+        raise SceneError("--out", f"{out}: another sweep is running in this folder "
+                         f"({str(exc).split('(', 1)[1].split(')')[0]}); wait for it to end "
+                         "or use another folder") from None
+    try:
+        return _run_cases(sweep, out, workers, executor, stream, progress, case_fn,
+                          progress_interval)
+    finally:
+        lock.release()
+
+
+def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, progress: bool,
+               case_fn, progress_interval) -> list:
+    """:func:`run_sweep`'s cases in ``out``, which it holds the lock of."""
     pool = _mpi_executor(workers) if executor == "mpi" and pending_cases(sweep, out) else None
     (out / "cases").mkdir(parents=True, exist_ok=True)
     for pattern in ("*.tmp-*", "*.progress"):  # left by a killed sweep (one sweep per DIR)
@@ -680,7 +727,8 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     every = max(0.1, min(2.0, status.interval / 2)) if status is not None else None
 
     def args_of(c):
-        return (sweep["scene"], sweep["backend"], c, str(out), mpi, every)
+        return (sweep["scene"], sweep["backend"], c, str(out), mpi, every,
+                sweep["scene_sha256"])
 
     running = [None]  # the running cases' indices, where the executor says
 

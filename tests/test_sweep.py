@@ -6,7 +6,11 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+import pytest
+
+from mdgran.scene import SceneError
 from mdgran.sweep import load_sweep, run_sweep
 
 
@@ -70,3 +74,50 @@ def test_sweep_on_another_backend_and_no_mixing(tmp_path, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--out" in err[0]
+
+
+def test_a_sweep_keeps_to_its_scene(tmp_path, monkeypatch):
+    """The scene path of a sweep file is read from the sweep file's folder; a resume on a
+    scene file changed since the sweep started is refused in one line, and a case started
+    after the change fails rather than run another scene (cases of chain.n 10 and 12 were
+    mixed in one sweep, all complete)."""
+    from mdgran.sweep import load_sweep, run_case, scene_digest
+
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "chain.toml").write_text("[chain]\nn = 10\n[run]\nduration = 2.0\n")
+    (folder / "s.toml").write_text('[sweep]\nscene = "chain.toml"\n[grid]\n'
+                                   '"impulse.velocity" = [1.0, 2.0]\n')
+    monkeypatch.chdir(tmp_path)  # not the sweep file's folder
+    sw = load_sweep(str(folder / "s.toml"))
+    assert Path(sw["scene"]) == folder / "chain.toml"
+    out = tmp_path / "out"
+    run_sweep(str(folder / "s.toml"), out, progress=False)
+    (folder / "chain.toml").write_text("[chain]\nn = 12\n[run]\nduration = 2.0\n")
+    with pytest.raises(SceneError, match="changed since the sweep"):
+        run_sweep(str(folder / "s.toml"), out, progress=False)
+    with pytest.raises(SceneError, match="changed since the sweep started"):
+        run_case(sw["scene"], "reference", sw["cases"][0], str(out),
+                 scene_sha256=sw["scene_sha256"])
+    assert scene_digest(sw["scene"]) != sw["scene_sha256"]
+
+
+def test_one_sweep_per_folder_at_a_time(tmp_path):
+    """A second sweep on a folder another is running in is refused in one line (two sweeps
+    on one folder recorded a case 'failed: FileNotFoundError', each removing the other's
+    temporaries); the folder is free again once the first ends."""
+    from mdgran.storage import OutputLock
+
+    spec = tmp_path / "s.toml"
+    spec.write_text('[sweep]\nscene = "micro-star"\n[fixed]\n"run.duration" = 1.0\n[grid]\n'
+                    '"impulse.velocity" = [1.0]\n')
+    out = tmp_path / "out"
+    out.mkdir()
+    first = OutputLock(out / "sweep")  # the other sweep, running
+    try:
+        with pytest.raises(SceneError, match="another sweep is running in this folder"):
+            run_sweep(str(spec), out, progress=False)
+    finally:
+        first.release()
+    assert run_sweep(str(spec), out, progress=False)[0]["status"] == "complete"
+    assert not (out / "sweep.lock").exists()

@@ -140,6 +140,14 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path):
     assert [r["index"] for r in failed_rows] == [1, 2, 4]
     text = "\n".join(status_markdown({"status": {"runs": {}, "sweep_not_complete": failed_rows}}))
     assert "case 0001" in text and "injected failure" in text
+    # the same command again, the faults gone: the failed cases are redone, the others kept
+    stamps = {i: (out / "cases" / f"{i:04d}.h5").stat().st_mtime_ns for i in (0, 3, 5)}
+    again = _start(tmp_path, spec, out, "")
+    stdout, stderr = again.communicate(timeout=240)
+    assert again.returncode == 0, stderr
+    assert json.loads((out / "summary.json").read_text())["complete"] == 6
+    assert all((out / "cases" / f"{i:04d}.h5").stat().st_mtime_ns == st
+               for i, st in stamps.items())
 
 
 def test_a_worker_killed_from_outside_is_replaced_and_its_case_redone(tmp_path):
