@@ -320,6 +320,22 @@ def dataset_paths(f) -> list:
     return sorted(out)
 
 
+def unreadable(path) -> str | None:
+    """Why the run file ``path`` cannot be read (one line), or None: it opens as HDF5 and holds
+    the run's ``/parameters`` with its scene and status (a case file cut short or overwritten
+    does not)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            par = f["parameters"]
+            par.attrs["scene"], par.attrs["status"]
+            f["observables/total_energy/value"].shape
+    except (OSError, KeyError, RuntimeError, ValueError) as exc:
+        return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
+    return None
+
+
 def read_h5(path) -> Run:
     """Read an mdgran H5MD file back into a :class:`Run` (also ``mdgran.read``).  The contact
     states come from ``/observables/contacts/closed``; a file written without them (an older

@@ -92,14 +92,22 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     """Refuse (:class:`~mdgran.scene.SceneError`, one line, exit status 2) a sweep folder that
     is unfinished (a case without its JSON) or whose finished cases lack their ``.h5`` (an
     older mdgran's MPI sweep wrote only the JSON on its worker ranks): their figures and tests
-    would silently leave those cases out.  Returns the cases that failed without writing an
+    would silently leave those cases out, or whose ``.h5`` cannot be read (cut short,
+    overwritten: the report ran a minute, then a traceback).  Returns the cases that failed
+    without writing an
     ``.h5`` (an exception, a worker that died), which the report names in its run status."""
     from .scene import SceneError
 
+    from .run_record import unreadable
+
     spec = json.loads((sweep_dir / "sweep.json").read_text())
-    unrun, no_h5, failed = [], [], []
+    unrun, no_h5, failed, broken = [], [], [], []
     for c in spec["cases"]:
-        if (sweep_dir / "cases" / f"{c['index']:04d}.h5").exists():
+        h5 = sweep_dir / "cases" / f"{c['index']:04d}.h5"
+        if h5.exists():
+            why = unreadable(h5)
+            if why is not None:
+                broken.append((c["index"], why))
             continue
         rec = _case_record(sweep_dir, c["index"])
         if rec is None:
@@ -115,6 +123,10 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     if unrun:
         raise SceneError(key, f"{sweep_dir}: the sweep is unfinished, {len(unrun)} of {total} "
                          f"cases have not run (no cases/NNNN.json: {_listed(unrun)})" + again)
+    if broken:
+        raise SceneError(key, f"{sweep_dir}: {len(broken)} of {total} case files cannot be read "
+                         f"({_listed([i for i, _ in broken])}; cases/{broken[0][0]:04d}.h5: "
+                         f"{broken[0][1]})" + again)
     if no_h5:
         raise SceneError(key, f"{sweep_dir}: {len(no_h5)} of {total} finished cases have no "
                          f"cases/NNNN.h5 ({_listed(no_h5)}; their .json says they ran: an "

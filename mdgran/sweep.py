@@ -97,6 +97,7 @@ import time as _time
 from pathlib import Path
 
 from .scene import SceneError, builtin_scenes, load_scene, read_toml
+from .run_record import unreadable
 from .storage import OutputLock, OutputLocked
 from .signals import interrupting
 
@@ -582,7 +583,8 @@ def sweep_summary(results: list) -> dict:
 
 
 def _finished(out_dir: Path, index: int) -> bool:
-    """A case is finished when its JSON exists, says it did not fail, and its H5 exists too:
+    """A case is finished when its JSON exists, says it did not fail, and its H5 exists and
+    opens (:func:`~mdgran.run_record.unreadable`):
     a failed case is run again by a rerun (a case that failed for a reason of the moment, such
     as another sweep on the same folder, must not stay failed), and so is a case whose JSON
     says it ran but whose H5 is missing (as an older mdgran's MPI sweep left on its worker
@@ -594,7 +596,8 @@ def _finished(out_dir: Path, index: int) -> bool:
         status = str(json.loads(js.read_text()).get("status", ""))
     except (ValueError, UnicodeDecodeError, AttributeError):
         return False
-    return not status.startswith("failed") and (out_dir / "cases" / f"{index:04d}.h5").exists()
+    h5 = out_dir / "cases" / f"{index:04d}.h5"
+    return not status.startswith("failed") and h5.exists() and unreadable(h5) is None
 
 
 def _extends(before, cases: list) -> bool:

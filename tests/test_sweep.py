@@ -121,3 +121,26 @@ def test_one_sweep_per_folder_at_a_time(tmp_path):
         first.release()
     assert run_sweep(str(spec), out, progress=False)[0]["status"] == "complete"
     assert not (out / "sweep.lock").exists()
+
+
+def test_an_unreadable_case_file_is_refused_by_report_and_redone_by_sweep(tmp_path, capsys):
+    """A case file cut short: mdgran report --sweep-dir refuses the folder up front in one line
+    naming the case (it ran a minute, then a traceback), and the same mdgran sweep command
+    redoes that case (it said all complete)."""
+    from mdgran.cli import main
+
+    spec = tmp_path / "s.toml"
+    spec.write_text('[sweep]\nscene = "micro-star"\n[fixed]\n"run.duration" = 1.0\n[grid]\n'
+                    '"impulse.velocity" = [1.0, 2.0]\n')
+    out = tmp_path / "sw"
+    run_sweep(str(spec), out, progress=False)
+    case = out / "cases" / "0001.h5"
+    case.write_bytes(case.read_bytes()[:1000])
+    assert main(["report", str(tmp_path / "rep"), "--sweep-dir", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot be read" in err[0] and "0001" in err[0]
+    kept = (out / "cases" / "0000.h5").stat().st_mtime_ns
+    res = run_sweep(str(spec), out, progress=False)
+    assert [r["status"] for r in res] == ["complete", "complete"]
+    assert (out / "cases" / "0000.h5").stat().st_mtime_ns == kept
+    assert case.stat().st_size > 1000
