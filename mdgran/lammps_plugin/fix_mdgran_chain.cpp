@@ -1207,9 +1207,14 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   drift_h = -1.0;
   double power = 0.0;
   flagged.clear();
-  // every contact, or the front's, in the order of cons (the power sums the same terms, less
-  // exact zeros)
-  auto contact = [&](const Con &c) {
+  // every contact, or the front's (pick: their indices), in the order of cons (the power sums
+  // the same terms, less exact zeros); one loop, not a function called from two loops, which
+  // the compiler need not inline into both (the loop over every contact is the hot one)
+  const Con *const con = cons.data();
+  const int *const pick = front_all ? nullptr : front_cons.data();
+  const int ncon = front_all ? (int) cons.size() : (int) front_cons.size();
+  for (int q = 0; q < ncon; q++) {
+    const Con &c = con[pick ? pick[q] : q];
     double d = u_[c.l] - u_[c.r] - gap_;
     double rate = w_[c.l] - w_[c.r];
     double F = 0.0, Fv = 0.0, g, gd;
@@ -1244,12 +1249,7 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
     if (h > 0.0 && (g < 0.0 || g < hh * gd)) flagged.push_back(c);
     fcon_[c.l] = F;
     fkick_[c.l] = Fv;
-  };
-  const Con *const con = cons.data();
-  if (front_all)
-    for (int k = 0, ncon = (int) cons.size(); k < ncon; k++) contact(con[k]);
-  else
-    for (int k : front_cons) contact(con[k]);
+  }
   if (h > 0.0)    // the same test for the contacts between two ghosts (event windows)
     for (const Con &c : gcons) {
       const double d = u_[c.l] - u_[c.r] - gap_, rate = w_[c.l] - w_[c.r];
