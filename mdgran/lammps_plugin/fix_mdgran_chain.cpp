@@ -600,7 +600,9 @@ void FixMdgranChain::pre_neighbor()
 {
   contacts_stale = 1;
   drift_h = -1.0;    // local indices change: u and w of the drift are void
-  if (located) share_ranges();    // the ghosts are new: which atoms each rank holds
+  if (!located) return;
+  share_ranges();    // the ghosts are new: which atoms each rank holds
+  front_take_arrivals();
 }
 
 void FixMdgranChain::setup(int vflag)
@@ -1456,6 +1458,8 @@ void FixMdgranChain::settle(std::vector<int> &list, double time)
 //     xs, vs, aprev) and its neighbours: an owned atom next to it must be stepped in this pass
 //     (a ghost that starts moving during a step moves the owned atoms next to it from the next
 //     pass on, and is seen by then);
+//   * at re-neighbouring it takes in every owned atom not at rest at the step's start (one
+//     may arrive from another rank moving);
 //   * a pulse's atom and its neighbours are always in it; with a base motion every atom is.
 // It only grows, until the next run.  The atoms outside it are at rest since the run's first
 // step, with xs = x and vs = v (from that step's drift), which the event windows read.  Once it
@@ -1530,6 +1534,18 @@ void FixMdgranChain::select_front_contacts()
   }
   if (!std::is_sorted(front_cons.begin(), front_cons.end()))
     std::sort(front_cons.begin(), front_cons.end());
+}
+
+// At re-neighbouring (atoms have migrated, after this step's drift): every owned atom not at
+// rest at the step's start, and its neighbours, so that an atom that arrives moving is in the
+// front (its former owner's ghost, this rank saw it at rest at the last step's start, or
+// already took it in); one loop over the owned atoms, as re-neighbouring is
+void FixMdgranChain::front_take_arrivals()
+{
+  if (!front_known) return;
+  tagint lo, hi;
+  owned_hull(xs, vs, 1, lo, hi);
+  if (lo <= hi) take_in(front_lo, front_hi, lo - 1, hi + 1);
 }
 
 // Before the pass: every ghost not at rest at the step's start, and its neighbours

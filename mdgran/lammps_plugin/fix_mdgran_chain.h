@@ -192,6 +192,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   void select_front();
   void select_front_contacts();
   void widen_front_by_ghosts();
+  void front_take_arrivals();
   void advance_front();
   inline const std::vector<int> &active_runs() const { return front_all ? runs : front_runs; }
   double located_pass(double h);
