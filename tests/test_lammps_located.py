@@ -252,3 +252,46 @@ def test_active_chain_is_the_fast_backends(plugin):
     assert np.abs(times - fast_times).max() < 1e-10
     a, b = native.trajectory, fast.trajectory
     assert np.abs(a.x - b.x).max() < 1e-9 and np.abs(a.v - b.v).max() < 1e-9
+
+
+
+
+def front_input(plugin, n):
+    """conftest's input with n beads between the walls, bead 1 (tag 2) struck, 4000 steps."""
+    return spread(plugin).replace("201.5", f"{n + 1}.5").replace(
+        "id 1 202", f"id 1 {n + 2}").replace("id 100", "id 2").replace(
+        "thermo 1200\nrun 1200", "thermo 4000\nrun 4000")
+
+
+def test_front_long_and_short_chains_agree(plugin, tmp_path):
+    """The fix steps only the activity front (the atoms not at rest and their neighbours),
+    which is exact: a chain struck at bead 1 (4000 steps; the disturbance reaches ~25 beads)
+    moves the first 2,000 beads of a chain of 20,000 as it moves a chain of 2,000, and the
+    first 40 as a chain of 40 does, bit for bit, on 1 rank and on 2, with the same events.  On
+    2 ranks the disturbance crosses the slab boundary of the chain of 40 (after tag 21): the
+    second rank learns of it through its ghosts."""
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    final, thermo = {}, {}
+    for ranks in (1, 2):
+        for n in (40, 2000, 20000):
+            name = f"{ranks}_{n}"
+            (tmp_path / f"{name}.in").write_text(front_input(plugin, n))
+            cmd = [lmp] if ranks == 1 else [MPIEXEC, "-n", "2", lmp]
+            out = subprocess.run([*cmd, "-var", "tag", name, "-in", f"{name}.in"], cwd=tmp_path,
+                                 capture_output=True, text=True, timeout=300)
+            assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+            rows = [ln.split() for ln in out.stdout.splitlines() if ln.strip().startswith("4000 ")]
+            thermo[ranks, n] = [float(v) for v in rows[-1][1:]]
+            final[ranks, n] = np.loadtxt(tmp_path / f"final.{name}", skiprows=9)
+    ref = final[1, 40]
+    moved = ref[np.abs(ref[:, 2]) > 0.0, 0]
+    assert 22 < moved.max() < 38  # past the slab boundary of 2 ranks, short of the chain's end
+    for key, rows in final.items():
+        assert np.array_equal(rows[:41], ref[:41]), key  # tag, x, vx (tag 42: the wall of 40)
+        assert np.array_equal(rows[:2001], final[1, min(key[1], 2000)][:2001]), key
+        assert not np.any(rows[41:, 2]) and np.array_equal(rows[41:, 1], rows[41:, 0] - 1)
+        # D_hysteresis, D_viscous, events: the same where the ranks share the work alike (on 2
+        # ranks the chain of 40 splits its sums between them: round-off, as LAMMPS's ke)
+        if key[0] == 1 or key[1] >= 2000:
+            assert thermo[key][2:] == thermo[key[0], 2000][2:], key
+        np.testing.assert_allclose(thermo[key], thermo[1, 40], rtol=1e-12, err_msg=str(key))

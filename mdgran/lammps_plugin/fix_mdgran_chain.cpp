@@ -4,10 +4,13 @@
 // same law, same step-quantized switching, same floating-point operations in the same order,
 // so that the two agree to round-off ("events quantized", the default).  With "events located"
 // the fix integrates the chain itself and locates each contact event inside the step, as
-// mdgran's fast backend does: the pass steps the whole chain, and each event's window of beads
-// is stepped again alone through its events while the beads next to it move on their
-// parabolas, so a step costs O(N + events) and no event needs a collective call; second order
-// in dt through snap events (sections "located events" and "event windows" below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
+// mdgran's fast backend does: the pass steps the chain's activity front (the atoms not at rest
+// and their neighbours; the others are a fixed point of the step, left untouched, bit for bit),
+// and each event's window of beads is stepped again alone through its events while the beads
+// next to it move on their parabolas, so the fix's part of a step costs O(front + events),
+// and neither the front nor an event needs a collective call (LAMMPS's own part of a step,
+// neighbour checks, communication, the force array, stays O(N)); second order in dt through
+// snap events (sections "located events", "the activity front" and "event windows" below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
 // units (mdgran/units.py): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
@@ -73,7 +76,8 @@
 //   * D_viscous: trapezoidal integral of the damping power c sum (d delta/dt)^2.
 //
 // Output: scalar = contact energy sum V (located: plus the substrate energy k1 u^2/2 + k3 u^4/4;
-// fix_modify energy yes puts it into pe); vector =
+// fix_modify energy yes puts it into pe; a loop over every atom when asked, the atoms outside
+// the activity front with their contacts' rest energy); vector =
 // [D_hysteresis, D_viscous, number of events]; array = events [time, contact number (1..n+1
 // with walls, 2..n without), kind (1 close, 0 open), step]; per-atom vector = state of the
 // contact to the atom's right (1 closed).  With several MPI ranks each contact is owned by
@@ -242,6 +246,12 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   own_hi = known_hi = ntags;
   wbase = 1;
   chat_time = -1.0;
+  front_known = 0;    // the first step of a run steps every atom
+  front_all = 1;
+  front_lo = 1;
+  front_hi = 0;
+  hull_lo = ntags + 1;
+  hull_hi = 0;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
   if (!base_file.empty()) read_base(base_file.c_str());
   driven = pulse_tag != 0 || based;
@@ -543,8 +553,9 @@ double FixMdgranChain::external_power() const
   const double *x = flat(atom->x), *v = flat(atom->v);
   const tagint *tag = atom->tag;
   double p = 0.0, total = 0.0;
-  for (size_t r = 0; r < runs.size(); r += 2)
-    for (int i = runs[r]; i < runs[r + 1]; i++) {
+  const std::vector<int> &runs_ = active_runs();    // the front's: the pulse's atom is in it,
+  for (size_t r = 0; r < runs_.size(); r += 2)     // and with a base every atom is
+    for (int i = runs_[r]; i < runs_[r + 1]; i++) {
       if (tag[i] == pulse_tag) p += now_fp * v[3 * i];
       if (based) {
         const double y = x[3 * i] - x0[i] - now_ub;
@@ -589,7 +600,9 @@ void FixMdgranChain::pre_neighbor()
 {
   contacts_stale = 1;
   drift_h = -1.0;    // local indices change: u and w of the drift are void
-  if (located) share_ranges();    // the ghosts are new: which atoms each rank holds
+  if (!located) return;
+  share_ranges();    // the ghosts are new: which atoms each rank holds
+  front_take_arrivals();
 }
 
 void FixMdgranChain::setup(int vflag)
@@ -942,8 +955,9 @@ void FixMdgranChain::ensure_scratch()
 // "event windows" below: the contacts with a root within SIMULTANEOUS of the window's earliest
 // switch there, opening: D_hysteresis += V(delta(te)), exact law; contacts on their switching
 // point and moving out switch back at once, settle), while the beads next to it move on their
-// parabolas.  A step costs one drift, one force pass and one kick over the chain, plus a few
-// passes over a few beads per event; no event needs a collective call.
+// parabolas.  A step costs one drift, one force pass and one kick over the activity front
+// (section "the activity front"), plus a few passes over a few beads per event; no event needs
+// a collective call.
 
 // The contacts this rank evaluates: those of its owned atoms with their right neighbour (own),
 // and those whose left atom is a ghost and right atom owned (a copy updated identically).
@@ -978,6 +992,8 @@ void FixMdgranChain::build_contacts()
     left[i] = l;
     if (l >= nlocal) cons.push_back({l, i, 0});
   }
+  con_of.assign(nall, -1);    // the activity front's contacts by left atom
+  for (size_t k = 0; k < cons.size(); k++) con_of[cons[k].l] = (int) k;
   gcons.clear();    // located, several ranks: the ghosts' own contacts, for event windows
   if (located)
     for (int i = nlocal; i < nall; i++) {
@@ -1023,21 +1039,24 @@ double MdgranLaw::mean_force(double d0, double d1) const
   return num / den;
 }
 
-// Drift of the owned moving atoms over the step h from its start, which it records first
-// (xs, vs: the current x and v of every owned atom; aprev is the start's acceleration):
+// Drift of the owned moving atoms of the front over the step h from its start, which it records
+// first (xs, vs: the current x and v of each of them; aprev is the start's acceleration):
 //   v = vs + h/2 a0 (= v_half),  x = xs + h v.   Ghosts follow by forward communication.
 // It also leaves the owned atoms' u and w for the pass over h that follows (drift_h = h), the
 // numbers that pass would compute from x and v: one read of LAMMPS's x and v rows (3 doubles
-// per atom) fewer per step.
+// per atom) fewer per step (when the front holds every owned atom; else the pass computes them
+// for the few atoms it needs).
 void FixMdgranChain::drift(double h)
 {
   if (contacts_stale) build_contacts();    // runs and still are those of the current atoms
+  select_front();    // the owned atoms of the front (the others are at rest: x, v stay)
+  const std::vector<int> &runs_ = active_runs();
   double *x = flat(atom->x), *v = flat(atom->v);
   double *const xs_ = xs, *const vs_ = vs, *const u_ = u, *const w_ = w;    // members as
   const double *const aprev_ = aprev, *const x0_ = x0;                      // locals
   const double hh = 0.5 * h;
-  for (size_t r = 0; r < runs.size(); r += 2)
-    for (int i = runs[r]; i < runs[r + 1]; i++) {
+  for (size_t r = 0; r < runs_.size(); r += 2)
+    for (int i = runs_[r]; i < runs_[r + 1]; i++) {
       xs_[i] = x[3 * i];
       vs_[i] = v[3 * i];
       double vh = vs_[i] + hh * aprev_[i];
@@ -1053,7 +1072,7 @@ void FixMdgranChain::drift(double h)
     u_[i] = x[3 * i] - x0_[i];
     w_[i] = v[3 * i] + hh * aprev_[i];
   }
-  drift_h = h;
+  drift_h = front_all ? h : -1.0;    // a part of the chain: the pass computes u, w of its own
 }
 
 // The owned atoms' accelerations at the end of a pass of length h (located_pass: contact and
@@ -1119,8 +1138,9 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
     bead_acc<EXT>(i, fl, fcon_[i], fvl, fkick_[i], u_[i], w_[i], k1_, k3_, a, av);
     check += a * 0.0 + av * 0.0;    // 0, unless some a or av is not finite (NaN then)
   };
-  for (size_t r = 0; r < runs.size(); r += 2)
-    for (int i = runs[r]; i < runs[r + 1]; i++) {
+  const std::vector<int> &runs_ = active_runs();    // the front's (the others keep a = 0)
+  for (size_t r = 0; r < runs_.size(); r += 2)
+    for (int i = runs_[r]; i < runs_[r + 1]; i++) {
       double a, av;
       accel(i, a, av);
       aprev_[i] = a;
@@ -1128,8 +1148,10 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
       if (last) f[3 * i] += a;
     }
   for (int i : still) {    // walls (a = 0) and atoms outside the fix group (not moved)
+    const tagint t = atom->tag[i];
+    if (!front_all && !is_wall(t) && (t < front_lo || t > front_hi)) continue;    // at rest
     double a = 0.0, av = 0.0;
-    if (!is_wall(atom->tag[i])) accel(i, a, av);
+    if (!is_wall(t)) accel(i, a, av);
     aprev[i] = a;
   }
   if (check != 0.0) {    // rare: find the first bead with a non-finite force
@@ -1165,11 +1187,19 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   double *const u_ = u, *const w_ = w, *const fcon_ = fcon, *const fkick_ = fkick;
   const double *const closed_ = closed, *const aprev_ = aprev, *const x0_ = x0;
   const double gap_ = gap, damping_ = damping, delta_off_ = delta_off, sing_ = sing;
-  if (h > 0.0)    // owned atoms: left by the drift over h, when nothing moved them since
-    for (int i = h == drift_h ? atom->nlocal : 0; i < nall; i++) {
-      u_[i] = x[3 * i] - x0_[i];
-      w_[i] = v[3 * i] + hh * aprev_[i];    // v_est = v_half + h/2 a0
+  auto set_uw = [&](int i) {
+    u_[i] = x[3 * i] - x0_[i];
+    w_[i] = v[3 * i] + hh * aprev_[i];    // v_est = v_half + h/2 a0
+  };
+  if (!front_all) {    // the atoms of the front's contacts, the ghosts, the others not moved
+    for (int k : front_cons) {
+      set_uw(cons[k].l);
+      set_uw(cons[k].r);
     }
+    for (int i = atom->nlocal; i < nall; i++) set_uw(i);
+    for (int i : still) set_uw(i);
+  } else if (h > 0.0)    // owned atoms: left by the drift over h, when nothing moved them since
+    for (int i = h == drift_h ? atom->nlocal : 0; i < nall; i++) set_uw(i);
   else
     for (int i = 0; i < nall; i++) {
       u_[i] = x[3 * i] - x0_[i];
@@ -1179,10 +1209,14 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   drift_h = -1.0;
   double power = 0.0;
   flagged.clear();
+  // every contact, or the front's (pick: their indices), in the order of cons (the power sums
+  // the same terms, less exact zeros); one loop, not a function called from two loops, which
+  // the compiler need not inline into both (the loop over every contact is the hot one)
   const Con *const con = cons.data();
-  const int ncon = (int) cons.size();
-  for (int k = 0; k < ncon; k++) {
-    const Con &c = con[k];
+  const int *const pick = front_all ? nullptr : front_cons.data();
+  const int ncon = front_all ? (int) cons.size() : (int) front_cons.size();
+  for (int q = 0; q < ncon; q++) {
+    const Con &c = con[pick ? pick[q] : q];
     double d = u_[c.l] - u_[c.r] - gap_;
     double rate = w_[c.l] - w_[c.r];
     double F = 0.0, Fv = 0.0, g, gd;
@@ -1225,9 +1259,10 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
       const double g = cl ? d - off_of(tag[c.l]) : -d, gd = cl ? rate : -rate;
       if (g < 0.0 || g < hh * gd) flagged.push_back(c);
     }
+  const std::vector<int> &runs_ = active_runs();
   if (sub_damping != 0.0)    // the substrate's damping power, g c_s w^2 of the moving beads
-    for (size_t q = 0; q < runs.size(); q += 2)
-      for (int i = runs[q]; i < runs[q + 1]; i++)
+    for (size_t q = 0; q < runs_.size(); q += 2)
+      for (int i = runs_[q]; i < runs_[q + 1]; i++)
       {
         const double wi = driven ? w_[i] - now_vb : w_[i];    // base motion: w - u_b'
         power += (MIX ? m_on_site[tag[i]] : 1.0) * (sub_damping * wi * wi);
@@ -1398,6 +1433,168 @@ void FixMdgranChain::settle(std::vector<int> &list, double time)
   }
 }
 
+// ---- the activity front ----------------------------------------------------------------------
+//
+// (mdgran/backends/fast_kernel.py at_rest, moving_hull, advance_front; docs/fast.md.)  An atom
+// at rest (v and a +0.0: a -0.0 would turn into +0.0 in a step; x not -0.0, which the drift's
+// x + h 0 would turn into +0.0) whose neighbours are at rest too is a fixed point of the step:
+// the drift leaves its x and v, the pass gives its contacts the forces they had and so the
+// atom the acceleration and kick it had, bit for bit.  A disturbance reaches one contact
+// further per force evaluation, so the atoms not at rest lie in a range of tags, the front,
+// that grows by at most one atom per step on each side.  Each rank steps (drift, pass, kick)
+// the moving atoms it owns in its front and evaluates the contacts with one of them (and every
+// contact between two ghosts, a few, for the event windows); the other atoms keep x, v, a and
+// LAMMPS's force 0 (a = +0.0), as stepping them would leave them.  The sums over contacts and
+// atoms (damping power) run over the same terms in the same order, less exact zeros; so the
+// results are those of stepping every atom, bit for bit.
+//
+// Each rank tracks its own front, over the atoms it holds, without any collective call:
+//   * the first step of a run steps every atom; its front is then the owned atoms not at rest
+//     at that step's start or end, and one more on each side;
+//   * after every step it takes in the step's event windows and their neighbours (a window
+//     may write an atom outside it: a neighbour across a closed edge), then grows while its
+//     edge atom or the one beyond, owned, is not at rest;
+//   * before every pass it takes in each ghost not at rest at the step's start (the forwarded
+//     xs, vs, aprev) and its neighbours: an owned atom next to it must be stepped in this pass
+//     (a ghost that starts moving during a step moves the owned atoms next to it from the next
+//     pass on, and is seen by then);
+//   * at re-neighbouring it takes in every owned atom not at rest at the step's start (one
+//     may arrive from another rank moving);
+//   * a pulse's atom and its neighbours are always in it; with a base motion every atom is.
+// It only grows, until the next run.  The atoms outside it are at rest since the run's first
+// step, with xs = x and vs = v (from that step's drift), which the event windows read.  Once it
+// holds every owned atom (a thermal chain) the loops are those over all of them (runs, cons).
+
+// Atom i at rest with position x[stride i], velocity v[stride i] and acceleration aprev[i]
+// (walls: always)
+inline int FixMdgranChain::rest_at(int i, const double *x, const double *v, int stride) const
+{
+  if (is_wall(atom->tag[i])) return 1;
+  const double xi = x[stride * i], vi = v[stride * i], ai = aprev[i];
+  return vi == 0.0 && ai == 0.0 && !std::signbit(vi) && !std::signbit(ai) &&
+      (xi != 0.0 || !std::signbit(xi));
+}
+
+// First and last tag of the owned atoms not at rest (lo > hi: none)
+void FixMdgranChain::owned_hull(const double *x, const double *v, int stride, tagint &lo,
+                                tagint &hi) const
+{
+  lo = ntags + 1;
+  hi = 0;
+  for (int i = 0; i < atom->nlocal; i++)
+    if (!rest_at(i, x, v, stride)) {
+      lo = std::min(lo, atom->tag[i]);
+      hi = std::max(hi, atom->tag[i]);
+    }
+}
+
+// The range lo .. hi (lo > hi: empty) joined with a .. b
+static void take_in(tagint &lo, tagint &hi, tagint a, tagint b)
+{
+  if (lo > hi) {
+    lo = a;
+    hi = b;
+  } else {
+    lo = std::min(lo, a);
+    hi = std::max(hi, b);
+  }
+}
+
+// front_all, or the owned moving atoms of the front as runs of local indices in increasing
+// order (the order of runs, which the sums over atoms follow)
+void FixMdgranChain::select_front()
+{
+  front_all = !front_known || (front_lo <= own_lo && front_hi >= own_hi);
+  front_runs.clear();
+  if (front_all) return;
+  std::vector<int> &ids = front_ids;
+  ids.clear();
+  const int nlocal = atom->nlocal;
+  for (tagint t = std::max(front_lo, own_lo); t <= std::min(front_hi, own_hi); t++) {
+    const int i = atom->map(t);
+    if (i >= 0 && i < nlocal && moves(i)) ids.push_back(i);
+  }
+  if (!std::is_sorted(ids.begin(), ids.end())) std::sort(ids.begin(), ids.end());
+  for (int i : ids) {
+    if (!front_runs.empty() && front_runs.back() == i) front_runs.back() = i + 1;
+    else front_runs.insert(front_runs.end(), {i, i + 1});
+  }
+}
+
+// The contacts of the front's atoms (left tags front_lo - 1 .. front_hi) that this rank
+// evaluates, as indices into cons in increasing order (the order of the full pass)
+void FixMdgranChain::select_front_contacts()
+{
+  front_cons.clear();
+  if (front_all) return;
+  const tagint a = std::max(front_lo - 1, known_lo), b = std::min(front_hi, known_hi);
+  for (tagint t = a; t <= b; t++) {
+    const int i = atom->map(t);
+    if (i >= 0 && con_of[i] >= 0) front_cons.push_back(con_of[i]);
+  }
+  if (!std::is_sorted(front_cons.begin(), front_cons.end()))
+    std::sort(front_cons.begin(), front_cons.end());
+}
+
+// At re-neighbouring (atoms have migrated, after this step's drift): every owned atom not at
+// rest at the step's start, and its neighbours, so that an atom that arrives moving is in the
+// front (its former owner's ghost, this rank saw it at rest at the last step's start, or
+// already took it in); one loop over the owned atoms, as re-neighbouring is
+void FixMdgranChain::front_take_arrivals()
+{
+  if (!front_known) return;
+  tagint lo, hi;
+  owned_hull(xs, vs, 1, lo, hi);
+  if (lo <= hi) take_in(front_lo, front_hi, lo - 1, hi + 1);
+}
+
+// Before the pass: every ghost not at rest at the step's start, and its neighbours
+void FixMdgranChain::widen_front_by_ghosts()
+{
+  const int nlocal = atom->nlocal, nall = nlocal + atom->nghost;
+  for (int i = nlocal; i < nall; i++)
+    if (!rest_at(i, xs, vs, 1)) take_in(front_lo, front_hi, atom->tag[i] - 1, atom->tag[i] + 1);
+}
+
+// After the step (the windows' end states committed): the front for the next one
+void FixMdgranChain::advance_front()
+{
+  if (based) {    // a base motion moves every atom
+    front_known = 1;
+    front_lo = 1;
+    front_hi = ntags;
+    return;
+  }
+  const double *x = flat(atom->x), *v = flat(atom->v);
+  tagint lo = front_lo, hi = front_hi;
+  if (!front_known) {    // the run's first step: the atoms not at rest at its start or end
+    owned_hull(x, v, 3, lo, hi);
+    if (hull_lo <= hull_hi) take_in(lo, hi, hull_lo, hull_hi);
+    if (lo <= hi) {
+      lo--;
+      hi++;
+    }
+  } else {
+    for (const Window &wn : wins) take_in(lo, hi, wn.lo - 1, wn.hi + 1);
+    // an atom not owned here counts as at rest: its owner steps it, and this rank sees it as a
+    // ghost before the next pass
+    auto rest = [&](tagint t) {
+      const int i = atom->map(t);
+      return i < 0 || i >= atom->nlocal || rest_at(i, x, v, 3);
+    };
+    if (lo <= hi) {
+      lo = std::max<tagint>(lo, 1);
+      hi = std::min(hi, ntags);
+      while (hi < ntags && !(rest(hi) && rest(hi + 1))) hi++;
+      while (lo > 1 && !(rest(lo) && rest(lo - 1))) lo--;
+    }
+  }
+  if (pulse_tag) take_in(lo, hi, pulse_tag - 1, pulse_tag + 1);
+  front_lo = lo;
+  front_hi = hi;
+  front_known = 1;
+}
+
 // LAMMPS's force array gets the acceleration (mass 1) of the current state (thermo, dumps)
 void FixMdgranChain::initial_integrate(int /*vflag*/)
 {
@@ -1452,6 +1649,8 @@ void FixMdgranChain::nve(int first)
 void FixMdgranChain::located_setup()
 {
   bigint step = update->ntimestep;
+  front_known = 0;    // the run's first step steps every atom
+  front_all = 1;
   if (!have_last || step != last_step) {
     build_contacts();
     comm->forward_comm(this);
@@ -1471,11 +1670,12 @@ void FixMdgranChain::located_setup()
     if (moves(i)) f[i][0] += aprev[i];
 }
 
-// One step (post_force; initial_integrate has drifted the owned atoms over dt from the step's
-// start and LAMMPS has forwarded the ghosts' x and v): the pass over the chain, the event
-// windows stepped alone (local_events), the kick, the windows' end states in place of the
-// pass's, then the trapezoids of the damping power and of the excitations' power, each with
-// what the windows' sub-steps change in it.
+// One step (post_force; initial_integrate has drifted the owned atoms of the front over dt from
+// the step's start and LAMMPS has forwarded the ghosts' x and v): the front widened by the
+// ghosts, the pass over it, the event windows stepped alone (local_events), the kick, the
+// windows' end states in place of the pass's, the front for the next step, then the trapezoids
+// of the damping power and of the excitations' power, each with what the windows' sub-steps
+// change in it.
 void FixMdgranChain::located_step()
 {
   const bigint step = update->ntimestep;
@@ -1483,16 +1683,22 @@ void FixMdgranChain::located_step()
   const double t0 = (double) (step - 1) * dt;
   if (contacts_stale) build_contacts();
   comm->forward_comm(this);    // ghosts: x0, state, the step's start (xs, vs, aprev)
+  if (front_known) widen_front_by_ghosts();
+  else owned_hull(xs, vs, 1, hull_lo, hull_hi);    // the start of the run's first step
+  select_front();    // again: the ghosts may widen it, re-neighbouring renumbers the atoms
+  select_front_contacts();
   set_drive_time(t0 + dt);
   const double p1 = located_pass(dt);
   double viscous = 0.0, power = 0.0, work_w = 0.0;    // the windows' changes (this rank's)
   wout.clear();
+  wins.clear();
   if (!flagged.empty()) {
     local_events(t0, dt, viscous, power, work_w);
     set_drive_time(t0 + dt);
   }
   accelerate(dt, 1);
   if (!wout.empty()) commit_windows();
+  advance_front();
   add_visc(0.5 * dt * (power_prev + p1) + viscous);
   power_prev = p1 + power;
   if (driven) {    // the excitations' work, by the same rule (the fast backend's)

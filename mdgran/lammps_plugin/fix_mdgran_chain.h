@@ -177,6 +177,24 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   int contacts_stale;                       // cons and left[] need rebuilding (re-neighboured)
   double drift_h;                           // h of the drift that left the owned atoms' u, w
                                             // for the next pass (-1: none)
+
+  // ---- the activity front (section "the activity front" in the .cpp) ----------------------
+  int front_known;                          // 0: the run's first step, every atom is stepped
+  tagint front_lo, front_hi;                // the tags this rank steps (lo > hi: none)
+  int front_all;                            // the front holds every owned atom: runs, cons
+  std::vector<int> front_runs;              // else the owned moving atoms in it, as runs
+  std::vector<int> front_cons;              // and the contacts the pass evaluates (cons index)
+  std::vector<int> con_of;                  // cons index of the contact with left atom i (-1)
+  std::vector<int> front_ids;               // scratch: the front's owned atoms
+  tagint hull_lo, hull_hi;                  // first step: owned atoms not at rest at its start
+  inline int rest_at(int i, const double *x, const double *v, int stride) const;
+  void owned_hull(const double *x, const double *v, int stride, tagint &lo, tagint &hi) const;
+  void select_front();
+  void select_front_contacts();
+  void widen_front_by_ghosts();
+  void front_take_arrivals();
+  void advance_front();
+  inline const std::vector<int> &active_runs() const { return front_all ? runs : front_runs; }
   double located_pass(double h);
   template <bool MIX> double located_pass_t(double h);
   template <bool EXT> void accelerate_t(double h, int last);
