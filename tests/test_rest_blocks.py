@@ -62,7 +62,7 @@ def test_long_chain_file_holds_every_value_and_costs_what_moved(tmp_path):
         <= 1e-12 * scale
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=8, deadline=None)
 @given(n=st.integers(40, 300), free=st.booleans(), gap=st.sampled_from([0.0, 0.002]),
        law=st.sampled_from(["schwarz", "dmt", "hertz"]), v0=st.sampled_from([3.0, 12.0, 40.0]),
        segment=st.integers(4, 32), block=st.integers(3, 64))

@@ -161,8 +161,9 @@ class Frames:
 
 
 #: a fixed-step backend resolves a force pulse of at least this many steps, and a base motion
-#: whose samples are at least this many steps apart (a pulse's work is then within ~1 % of the
-#: reference's: 0.85 (dt / T)^2 measured at T = 5 and 20 dt)
+#: whose samples are at least this many steps apart (a pulse's work is then within 1.6 % of the
+#: reference's: c (dt / T)^2, c = 0.15-1.64 measured over 10-60 steps and starts, 1.64 for a
+#: pulse that starts on a step)
 MIN_STEPS = 10
 
 
