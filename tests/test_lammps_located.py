@@ -153,6 +153,47 @@ def test_located_refuses_a_second_integrator(plugin, tmp_path):
     assert "integrates the chain itself: unfix move" in out.stdout + out.stderr
 
 
+def _lmp(tmp_path, script, tag="x", timeout=60):
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    return subprocess.run([lmp, "-var", "tag", tag, "-in", str(script)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("bad,key", [("k1 -5", "k1"), ("damping -1", "damping"),
+                                     ("gap -0.5", "gap"), ("lambda -0.5", "lambda")])
+def test_the_fix_refuses_negative_coefficients(plugin, tmp_path, bad, key):
+    """k1 -5 or damping -1 ran (exit 0, a ledger of 6.3e10 for E0 = 72): the fix refuses a
+    negative one in one line naming it (LAMMPS itself refuses nan and inf)."""
+    script = tmp_path / "bad.in"
+    script.write_text(spread(plugin).replace("walls yes events located",
+                                             f"walls yes events located {bad}"))
+    out = _lmp(tmp_path, script)
+    assert out.returncode != 0
+    assert f"{key} must be a finite number >= 0" in out.stdout + out.stderr
+
+
+def test_a_restart_block_of_another_drive_is_refused(plugin, tmp_path):
+    """A restart block written without a pulse was read by a fix with one: 7 values out of a
+    block of 5 (bytes past its end). The block carries its mark and count; the mismatch is
+    refused in one line."""
+    small = spread(plugin).replace("201.5", "41.5").replace(
+        "id 1 202", "id 1 42").replace("id 100", "id 2")
+    head, setup = small.split("pair_style none\n")
+    head += "pair_style none\n"
+    setup = setup.split("velocity")[0]
+    (tmp_path / "a.in").write_text(head + setup + "timestep 0.0025\nrun 10\n"
+                                   "write_restart plain.restart\n")
+    driven = setup.replace("walls yes events located", "walls yes events located "
+                           "pulse 5 1.0 0.5 0.0")
+    (tmp_path / "b.in").write_text("read_restart plain.restart\nplugin load " + str(plugin) +
+                                   "\ncomm_modify vel yes cutoff 6.0\npair_style none\n" +
+                                   driven + "timestep 0.0025\nrun 10\n")
+    assert _lmp(tmp_path, tmp_path / "a.in").returncode == 0
+    out = _lmp(tmp_path, tmp_path / "b.in")
+    assert out.returncode != 0
+    assert "restart file's block holds 5 values, this fix needs 7" in out.stdout + out.stderr
+
+
 def test_restart_and_split_runs_continue_bitwise(plugin, tmp_path):
     """A located run continued from a restart file, and one run in two pieces, are the
     uninterrupted run bit for bit (the stored accelerations and damping power carry over)."""

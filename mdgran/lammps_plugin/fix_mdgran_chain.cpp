@@ -40,6 +40,10 @@
 //     base FILE (a base motion u_b(t) under the substrate, mdgran.native_plugin.write_base:
 //            its piecewise cubics on a uniform grid; the substrate then acts on u - u_b and
 //            w - u_b', the walls stay at 0; default: none)
+//   k1, k3, damping, sub_damping, tether, gap and lambda must be finite and >= 0: anything else
+//   stops the input with one line naming the keyword.  The fix's restart block begins with a
+//   mark and the count of its values; a block of another format, or written with (without) a
+//   pulse or base motion this fix lacks (has), is refused.
 //   With pulse or base the excitations are evaluated at the time of the forces (quantized:
 //   t = step dt, the end of the position update; located: each pass's end), and their work
 //   W, dW/dt = F v_b + u_b' sum_i F_sub,i, by the trapezoidal rule as D_viscous (quantized:
@@ -108,6 +112,7 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 using namespace LAMMPS_NS;
 using namespace FixConst;
@@ -115,6 +120,7 @@ using namespace FixConst;
 static constexpr int NEWTON_STEPS = 7;    // as mdgran/contact.py
 static constexpr int T_BLOCK = 16;        // compressions inverted together (t_of_delta_n)
 static constexpr int NPERATOM = 4;        // stored in restart files: x0, closed, dprev, aprev
+static constexpr double RESTART_MARK = 77007001.0;    // "mdgran chain", restart format 1
 static constexpr int NEXCHANGE = 6;       // migrate with the atom: those, and xs, vs (located)
 // located events (as mdgran/backends/fast_kernel.py)
 static constexpr int MAX_SWITCHES = 4;    // switches of one contact at one instant (chatter)
@@ -198,6 +204,15 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     }
     else error->all(FLERR, "fix mdgran/chain: unknown keyword {}", key);
   }
+  const std::pair<const char *, double> nonnegative[] = {
+      {"k1", k1}, {"k3", k3}, {"damping", damping}, {"sub_damping", sub_damping},
+      {"tether", tether}, {"gap", gap}, {"lambda", lambda}};
+  for (const auto &kv : nonnegative)
+    if (!(kv.second >= 0.0 && std::isfinite(kv.second)))
+      error->all(FLERR, "fix mdgran/chain: {} must be a finite number >= 0, not {}", kv.first,
+                 kv.second);
+  if (pulse_tag > 0 && !(std::isfinite(pulse_amp) && std::isfinite(pulse_start)))
+    error->all(FLERR, "fix mdgran/chain: pulse A and t0 must be finite numbers");
   if (located && tether != 0.0)
     error->all(FLERR, "fix mdgran/chain: tether is for events quantized (located applies k1)");
   if (located && integrate)
@@ -2493,9 +2508,10 @@ void FixMdgranChain::write_restart(FILE *fp)
   double part[5] = {d_hyst, d_visc, power_prev, work, work_prev};
   double sum[5] = {d_hyst, d_visc, power_prev, work, work_prev};
   if (comm->nprocs > 1) MPI_Allreduce(part, sum, 5, MPI_DOUBLE, MPI_SUM, world);
-  double list[7] = {d_hyst_all + sum[0], d_visc_all + sum[1], sum[2], (double) last_step,
-                    (double) have_last, work_all + sum[3], sum[4]};
-  const int nlist = driven ? 7 : 5;
+  const int nvalues = driven ? 7 : 5;    // after the mark and the count
+  double list[9] = {RESTART_MARK, (double) nvalues, d_hyst_all + sum[0], d_visc_all + sum[1],
+                    sum[2], (double) last_step, (double) have_last, work_all + sum[3], sum[4]};
+  const int nlist = nvalues + 2;
   if (comm->me == 0) {
     int size = nlist * sizeof(double);
     fwrite(&size, sizeof(int), 1, fp);
@@ -2505,7 +2521,19 @@ void FixMdgranChain::write_restart(FILE *fp)
 
 void FixMdgranChain::restart(char *buf)
 {
-  auto list = (double *) buf;
+  // the block begins with this fix's mark and the count of values after it: a block of
+  // another fix or format, or one written with (without) a drive that this fix lacks (has),
+  // is refused rather than read past its end
+  auto head = (double *) buf;
+  if (head[0] != RESTART_MARK)
+    error->all(FLERR, "fix mdgran/chain: the restart file's block for this fix was not written "
+               "by this version of it; start the run again from its input");
+  const int expected = driven ? 7 : 5;
+  if ((int) head[1] != expected)
+    error->all(FLERR, "fix mdgran/chain: the restart file's block holds {} values, this fix "
+               "needs {} (it was written {} a pulse or base motion)", (int) head[1], expected,
+               expected == 7 ? "without" : "with");
+  auto list = head + 2;
   d_hyst_all = list[0];
   d_visc_all = list[1];
   power_prev = comm->me == 0 ? list[2] : 0.0;    // rank 0 holds the sum over the ranks
