@@ -77,3 +77,21 @@ def test_short_runs_of_the_paper_matching_have_equal_pulse_speeds():
     speed = {k: primary_pulse_speed(run(sc[k], "reference").trajectory)
              for k in ("micro", "macro-pulse")}
     assert speed["macro-pulse"] == pytest.approx(speed["micro"], rel=0.01)
+
+
+def test_the_scale_verdict_says_what_the_control_shows():
+    """The study's numbers (micro 81 new clusters and 1/e decay at 1.6 T_c, the Hertz macro
+    chain 2502 and 1.14, the macro chain with adhesion 71 and 1.36): the clusters follow
+    adhesion and the decay lies nearer the Hertz chain, so the verdict is split and says so
+    (it read "supported by the adhesion control", on the decay alone)."""
+    def runs(clusters, decay):
+        return {"micro": {"clusters_formed": 81, "decay_1e_over_T_c": 1.6},
+                "macro-pulse": {"clusters_formed": 2502, "decay_1e_over_T_c": 1.14},
+                "macro-schwarz": {"clusters_formed": clusters, "decay_1e_over_T_c": decay}}
+
+    split = controls.scale_verdict(runs(71, 1.36))
+    assert split.startswith("split") and "new clusters: like micro" in split
+    assert "1/e decay: like Hertz macro" in split
+    assert controls.scale_verdict(runs(71, 1.55)).startswith("not supported: adhesion")
+    assert controls.scale_verdict(runs(2000, 1.2)).startswith("supported by the adhesion")
+    assert "new clusters: like micro)" in controls.scale_verdict(runs(71, None))
