@@ -24,6 +24,7 @@ Usage (the numba kernel is the mdgran imported: the working tree, or a worktree 
 with ``PYTHONPATH``)::
 
     python benchmarks/kernel_floor.py            # results/kernel_floor.json (~4 min)
+    python benchmarks/kernel_floor.py --mixed    # results/kernel_floor_mixed.json
     PYTHONPATH=/work/wt-x python benchmarks/kernel_floor.py --out /tmp/head.json
     python benchmarks/kernel_floor.py --quick    # smoke run
 """
@@ -44,6 +45,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "c_floor" / "floor.c"
 OUT = HERE / "results" / "kernel_floor.json"
+OUT_MIXED = HERE / "results" / "kernel_floor_mixed.json"  # --mixed
 BEAD_STEPS = 2e7  # per timed repeat
 REPEATS = 7
 SIZES = (10_000, 100_000, 1_000_000)
@@ -252,7 +254,8 @@ def mdgran_source() -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes, 3 repeats")
-    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--out", type=Path, default=None,
+                    help="default results/kernel_floor.json, with --mixed kernel_floor_mixed.json")
     ap.add_argument("--threads", type=int, nargs="+", default=[1],
                     help="thread counts of the numba kernel (run.threads), e.g. 1 2")
     ap.add_argument("--sizes", type=int, nargs="+", default=None)
@@ -260,6 +263,8 @@ def main(argv=None) -> None:
                     help="micro-star beside a dimer and a two-density chain (MIXED)")
     args = ap.parse_args(argv)
     cases = MIXED if args.mixed else LAWS
+    if args.out is None:
+        args.out = OUT_MIXED if args.mixed else OUT
     sizes, repeats, bead_steps = ((10_000, 100_000), 3, 5e6) if args.quick else \
         (SIZES, REPEATS, BEAD_STEPS)
     with tempfile.TemporaryDirectory() as td:
