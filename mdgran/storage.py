@@ -4,7 +4,9 @@
   HDF5's own file locking is switched off, e.g. ``HDF5_USE_FILE_LOCKING=FALSE`` on clusters)
   from before it creates its temporary until its file is in place; a second run on the same
   name is refused at once, naming the holder.  The kernel drops the lock when its process
-  dies, so a killed run never leaves a stale lock behind.
+  dies, so a killed run never leaves a stale lock behind.  A process forked while a lock is
+  held (a sweep's worker) closes its copy of the descriptor at once: the lock belongs to the
+  process that took it alone, and ends with it.
 * :class:`StorageError`: the file system refused a write (full disk, quota, file size limit,
   read-only remount).  :func:`abandon` then closes the HDF5 file without letting the HDF5
   library write to the failing disk again (it would fail again at exit and crash the
@@ -30,6 +32,22 @@ class OutputLocked(ValueError):
 def lock_path(path) -> Path:
     path = Path(path)
     return path.with_name(f"{path.name}.lock")
+
+
+#: descriptors of the locks this process holds (a forked child closes its copies)
+_HELD: set = set()
+
+
+def _close_inherited_locks():
+    for fd in list(_HELD):
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _HELD.clear()
+
+
+os.register_at_fork(after_in_child=_close_inherited_locks)
 
 
 class OutputLock:
@@ -61,6 +79,7 @@ class OutputLock:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}".encode(), 0)
         self.fd = fd
+        _HELD.add(fd)
 
     def release(self):
         if self.fd is None:
@@ -68,6 +87,7 @@ class OutputLock:
         try:
             self.path.unlink(missing_ok=True)
         finally:
+            _HELD.discard(self.fd)
             os.close(self.fd)  # closing drops the flock
             self.fd = None
 

@@ -219,6 +219,28 @@ def test_second_run_on_the_same_output_is_refused(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_killed_holders_forked_children_do_not_keep_its_lock(tmp_path):
+    """A sweep's workers are forked while it holds ``sweep.lock``; when the sweep is killed,
+    a worker still exiting kept the lock and the resume was refused as 'another sweep'."""
+    from mdgran.storage import OutputLock
+
+    out = tmp_path / "c.h5"
+    code = ("import os, sys, time\n"
+            "from mdgran.storage import OutputLock\n"
+            f"lock = OutputLock({str(out)!r})\n"
+            "child = os.fork()\n"
+            "if child == 0:\n"
+            "    os.close(1); os.close(2); time.sleep(60); os._exit(0)\n"
+            "print(child, flush=True)\n"
+            "os._exit(0)\n")  # the holder dies without releasing; its child lives on
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    child = int(r.stdout.split()[0])
+    try:
+        OutputLock(out).release()  # the child is alive, and the lock is free
+    finally:
+        os.kill(child, signal.SIGKILL)
+
+
 @pytest.fixture(scope="module")
 def partial(tmp_path_factory, request):
     """A reference run of micro-star to t = 20, interrupted at t = 12 with a checkpoint, and
