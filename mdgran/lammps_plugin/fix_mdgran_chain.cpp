@@ -82,7 +82,8 @@
 // Output: scalar = contact energy sum V (located: plus the substrate energy k1 u^2/2 + k3 u^4/4;
 // fix_modify energy yes puts it into pe; a loop over every atom when asked, the atoms outside
 // the activity front with their contacts' rest energy); vector =
-// [D_hysteresis, D_viscous, number of events]; array = events [time, contact number (1..n+1
+// [D_hysteresis, D_viscous, number of events, external work, first and last tag of the moved
+// hull (take_in_moved_state: outside it every atom is at x0 and at rest; quantized: 1, N)]; array = events [time, contact number (1..n+1
 // with walls, 2..n without), kind (1 close, 0 open), step]; per-atom vector = state of the
 // contact to the atom's right (1 closed).  With several MPI ranks each contact is owned by
 // the rank owning its left atom (events and dissipation there); the rank owning the right atom
@@ -239,8 +240,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   extscalar = 1;
   energy_global_flag = 1;
   vector_flag = 1;
-  size_vector = 4;
-  extvector = 1;
+  size_vector = 6;
+  extvector = -1;    // the sums are extensive, the moved hull's tags are not
   array_flag = 1;
   size_array_rows = 0;
   size_array_cols = 4;
@@ -267,6 +268,10 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   front_hi = 0;
   hull_lo = ntags + 1;
   hull_hi = 0;
+  moved_lo = ntags + 1;
+  moved_hi = 0;
+  moved_all[0] = 1.0;
+  moved_all[1] = (double) ntags;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
   if (!base_file.empty()) read_base(base_file.c_str());
   driven = pulse_tag != 0 || based;
@@ -291,10 +296,13 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   ncompute = 0;
   energy_at = -1;
   energy_cache = 0.0;
+  ext_flags = {1, 1, 1, 1, 0, 0};    // last: an error above must not leave it to Fix to free
+  extlist = ext_flags.data();        // ours (the destructor sets it back to null)
 }
 
 FixMdgranChain::~FixMdgranChain()
 {
+  extlist = nullptr;    // ext_flags owns it
   if (copymode) return;
   atom->delete_callback(id, Atom::GROW);
   atom->delete_callback(id, Atom::RESTART);
@@ -866,6 +874,10 @@ void FixMdgranChain::sync()
 {
   if (comm->nprocs == 1) return;
   synced_step = update->ntimestep;
+  double hull[2] = {(double) moved_lo, -(double) moved_hi}, both[2];
+  MPI_Allreduce(hull, both, 2, MPI_DOUBLE, MPI_MIN, world);
+  moved_all[0] = both[0];
+  moved_all[1] = -both[1];
   double part[3] = {d_hyst, d_visc, work}, sum[3];
   MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
   d_hyst_all += sum[0];
@@ -1610,6 +1622,21 @@ void FixMdgranChain::advance_front()
   front_known = 1;
 }
 
+// The moved hull (vector 4 and 5: first and last tag, lo > hi: none): every atom that any step
+// changed (the front after each step holds them) or that a run's set-up found not at rest or
+// away from its initial position (x != x0 + 0.0).  Outside it every atom sits at x0 with v and
+// a +0.0 and its contacts in their initial state, so a reader needs only the atoms in it.
+void FixMdgranChain::take_in_moved_state()
+{
+  const double *x = flat(atom->x), *v = flat(atom->v);
+  for (int i = 0; i < atom->nlocal; i++) {
+    if (is_wall(atom->tag[i])) continue;
+    const double d = x[3 * i] - x0[i];
+    if (!rest_at(i, x, v, 3) || d != 0.0 || std::signbit(d))
+      take_in(moved_lo, moved_hi, atom->tag[i], atom->tag[i]);
+  }
+}
+
 // LAMMPS's force array gets the acceleration (mass 1) of the current state (thermo, dumps)
 void FixMdgranChain::initial_integrate(int /*vflag*/)
 {
@@ -1658,14 +1685,33 @@ void FixMdgranChain::nve(int first)
   drift_h = dtv;
 }
 
+// A run that goes on from the step the last one ended at keeps the activity front, so that a
+// run in pieces of a few steps (mdgran's frames) steps what moves, not the whole chain at each
+// piece's first step; unless an owned atom outside the front is no longer where that step
+// left it, at rest (x = xs, v = vs: a command between the runs moved it).  One comparison
+// per atom.
+int FixMdgranChain::front_holds_still() const
+{
+  if (front_all) return 0;
+  const double *x = flat(atom->x), *v = flat(atom->v);
+  for (int i = 0; i < atom->nlocal; i++) {
+    const tagint t = atom->tag[i];
+    if (is_wall(t) || (t >= front_lo && t <= front_hi)) continue;
+    if (x[3 * i] != xs[i] || v[3 * i] != vs[i] || !rest_at(i, x, v, 3)) return 0;
+  }
+  return 1;
+}
+
 // Set-up of a run: at the first one, settle every contact and compute a(0) and P(0) with the
 // actual velocities; later ones (same step) hand LAMMPS the stored acceleration unchanged, so
 // that a run in several pieces is the same as one.
 void FixMdgranChain::located_setup()
 {
   bigint step = update->ntimestep;
-  front_known = 0;    // the run's first step steps every atom
-  front_all = 1;
+  if (!(have_last && step == last_step && front_known && front_holds_still())) {
+    front_known = 0;    // the run's first step steps every atom
+    front_all = 1;
+  }
   if (!have_last || step != last_step) {
     build_contacts();
     comm->forward_comm(this);
@@ -1679,6 +1725,7 @@ void FixMdgranChain::located_setup()
     if (driven) work_prev = external_power();
     last_step = step;
     have_last = 1;
+    take_in_moved_state();
   }
   double **f = atom->f;    // LAMMPS's force array gets the acceleration (mass 1)
   for (int i = 0; i < atom->nlocal; i++)
@@ -1714,6 +1761,7 @@ void FixMdgranChain::located_step()
   accelerate(dt, 1);
   if (!wout.empty()) commit_windows();
   advance_front();
+  if (front_lo <= front_hi) take_in(moved_lo, moved_hi, front_lo, front_hi);
   add_visc(0.5 * dt * (power_prev + p1) + viscous);
   power_prev = p1 + power;
   if (driven) {    // the excitations' work, by the same rule (the fast backend's)
@@ -2406,7 +2454,10 @@ double FixMdgranChain::compute_vector(int n)
   if (n == 0) return d_hyst_all;
   if (n == 1) return d_visc_all;
   if (n == 2) return (double) ev_all.size();
-  return work_all;
+  if (n == 3) return work_all;
+  if (!located) return n == 4 ? 1.0 : (double) ntags;    // every atom is stepped
+  if (comm->nprocs > 1) return moved_all[n - 4];
+  return n == 4 ? (double) moved_lo : (double) moved_hi;
 }
 
 double FixMdgranChain::compute_array(int row, int col)

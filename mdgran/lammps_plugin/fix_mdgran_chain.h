@@ -187,6 +187,11 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   std::vector<int> con_of;                  // cons index of the contact with left atom i (-1)
   std::vector<int> front_ids;               // scratch: the front's owned atoms
   tagint hull_lo, hull_hi;                  // first step: owned atoms not at rest at its start
+  tagint moved_lo, moved_hi;                // every atom this rank changed or found moved
+  double moved_all[2];                      // their hull over the ranks at the last sync
+  std::vector<int> ext_flags;               // extlist: which vector values are extensive
+  void take_in_moved_state();
+  int front_holds_still() const;
   inline int rest_at(int i, const double *x, const double *v, int stride) const;
   void owned_hull(const double *x, const double *v, int stride, tagint &lo, tagint &hi) const;
   void select_front();
