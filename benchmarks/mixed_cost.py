@@ -1,7 +1,7 @@
 """Cost per bead-step of the fast backend on a chain of unlike beads against the homogeneous one.
 
     python benchmarks/mixed_cost.py [--sizes 1e4,1e5,1e6] [--repeats 5] [--rounds 2]
-                                    [--trees /work/main,/work/wt] [--out FILE]
+                                    [--trees TREE1,TREE2] [--out FILE]
 
 Cases (micro-star's physics, N + 1 beads so that a dimer touches both walls with large beads):
 

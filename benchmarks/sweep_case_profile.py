@@ -20,7 +20,7 @@ wall times), in ms per case:
 Usage::
 
     python benchmarks/sweep_case_profile.py                 # results/sweep_case_profile.json
-    python benchmarks/sweep_case_profile.py --before /work/wt-before   # and an older tree beside
+    python benchmarks/sweep_case_profile.py --before ../mdgran-before   # and an older tree beside
 
 Writes benchmarks/results/sweep_case_profile.json (``--out`` to change).
 """
