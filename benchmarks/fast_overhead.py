@@ -24,11 +24,11 @@ before and after each measurement (the machine is shared: read the timings with 
 
 Usage::
 
-    git -C /work/main worktree add /work/wt-before HEAD
-    python benchmarks/fast_overhead.py --before /work/wt-before   # results/fast_overhead.json
-    python benchmarks/fast_overhead.py --before /work/wt-before --quick   # smoke run (~1 min)
+    git worktree add ../mdgran-before HEAD
+    python benchmarks/fast_overhead.py --before ../mdgran-before   # results/fast_overhead.json
+    python benchmarks/fast_overhead.py --before ../mdgran-before --quick   # smoke run (~1 min)
     python benchmarks/fast_overhead.py              # the working tree alone
-    python benchmarks/fast_overhead.py --before /work/wt-before --parts micro_star \
+    python benchmarks/fast_overhead.py --before ../mdgran-before --parts micro_star \
         --out /tmp/frames.json                     # the frame overhead alone
 """
 from __future__ import annotations

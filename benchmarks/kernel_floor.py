@@ -23,9 +23,9 @@ built with the system C compiler, beside the numba kernel on the same states.
 Usage (the numba kernel is the mdgran imported: the working tree, or a worktree of HEAD
 with ``PYTHONPATH``)::
 
-    python benchmarks/kernel_floor.py            # results/kernel_floor.json (~4 min)
+    python benchmarks/kernel_floor.py --threads 1 2   # results/kernel_floor.json (~6 min)
     python benchmarks/kernel_floor.py --mixed    # results/kernel_floor_mixed.json
-    PYTHONPATH=/work/wt-x python benchmarks/kernel_floor.py --out /tmp/head.json
+    PYTHONPATH=../mdgran-before python benchmarks/kernel_floor.py --out /tmp/head.json
     python benchmarks/kernel_floor.py --quick    # smoke run
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Cost per bead-step of the fast backend on a chain of unlike beads against the homogeneous one.
 
     python benchmarks/mixed_cost.py [--sizes 1e4,1e5,1e6] [--repeats 5] [--rounds 2]
-                                    [--trees /work/main,/work/wt] [--out FILE]
+                                    [--trees TREE1,TREE2] [--out FILE]
 
 Cases (micro-star's physics, N + 1 beads so that a dimer touches both walls with large beads):
 
@@ -102,8 +102,7 @@ def main(argv=None):
     ap.add_argument("--trees", default="", help="comma-separated mdgran source trees to "
                     "compare (PYTHONPATH of each run); default: this interpreter's")
     ap.add_argument("--cases", default=",".join(CASES))
-    ap.add_argument("--threads", type=int, default=1, help="run.threads (default 1; the "
-                    "results of mixed_cost.json before it ran on the default 0: all cores)")
+    ap.add_argument("--threads", type=int, default=1, help="run.threads (default 1)")
     args = ap.parse_args(argv)
     trees = args.trees.split(",") if args.trees else [""]
     cases = args.cases.split(",")

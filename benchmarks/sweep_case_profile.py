@@ -19,7 +19,10 @@ wall times), in ms per case:
 
 Usage::
 
-    python benchmarks/sweep_case_profile.py --before /work/wt-before --out results/X.json
+    python benchmarks/sweep_case_profile.py                 # results/sweep_case_profile.json
+    python benchmarks/sweep_case_profile.py --before ../mdgran-before   # and an older tree beside
+
+Writes benchmarks/results/sweep_case_profile.json (``--out`` to change).
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 AFTER = HERE.parent
 CASES = range(40, 60)
+OUT = HERE / "results" / "sweep_case_profile.json"
 
 CHILD = r'''
 import collections, functools, json, os, shutil, sys, tempfile, time, types
@@ -101,7 +105,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", type=Path, help="a copy of the old tree")
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--out", type=Path, help="write the result JSON here")
+    ap.add_argument("--out", type=Path, default=OUT, help="write the result JSON here")
     ap.add_argument("--note", default="")
     args = ap.parse_args(argv)
     trees = {"after": AFTER} if args.before is None else {"before": args.before, "after": AFTER}
@@ -118,9 +122,8 @@ def main(argv=None):
                   + ", ".join(f"{name} {ms:.1f}" for name, ms in row["per_case_ms"].items()),
                   flush=True)
     result["load_at_end"] = list(os.getloadavg())
-    if args.out is not None:
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
-        print(f"wrote {args.out}")
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

@@ -31,9 +31,9 @@ but the timings): ``identity`` in the JSON counts the identical and the differin
 
 Usage::
 
-    git -C /work/main worktree add /work/wt-before HEAD
-    python benchmarks/sweep_wall.py --before /work/wt-before        # results/sweep_wall.json
-    python benchmarks/sweep_wall.py --before /work/wt-before --quick
+    git worktree add ../mdgran-before HEAD
+    python benchmarks/sweep_wall.py --before ../mdgran-before        # results/sweep_wall.json
+    python benchmarks/sweep_wall.py --before ../mdgran-before --quick
     python benchmarks/sweep_wall.py --workers 2                     # the working tree alone
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Command line: ``mdgran scenes | info | run | compare | sweep | report`` (contract.md).
+"""Command line: ``mdgran scenes | info | run | compare | sweep | report`` (docs/cli.md).
 
 Exit status: 0 success; 3 a comparison whose verdict fails; 2 bad input (one line on stderr naming the key and what is allowed,
 no traceback, no output file); 1 a failure during a run (the output file is written first,

@@ -51,7 +51,7 @@ class BackendUnavailable(RuntimeError):
 
 @dataclass(repr=False)
 class RunResult:
-    """What :func:`run` (and ``mdgran.run``) returns; all values nondimensional (physics.md
+    """What :func:`run` (and ``mdgran.run``) returns; all values nondimensional (docs/model.md,
     section 1: time ``1/q``, length ``p``, energy ``eta p``).
 
     Attributes:

@@ -4,8 +4,8 @@ folders dataset by dataset with ``numpy.array_equal`` (NaNs equal where both are
 
 Usage::
 
-    # before: a pristine copy of HEAD (git worktree add /work/wt-x HEAD)
-    PYTHONPATH=/work/wt-x python reference/check_bitwise.py generate /tmp/bits-before
+    # before: a pristine copy of HEAD (git worktree add ../mdgran-before HEAD)
+    PYTHONPATH=../mdgran-before python reference/check_bitwise.py generate /tmp/bits-before
     # after: the working tree
     python reference/check_bitwise.py generate /tmp/bits-after
     python reference/check_bitwise.py compare /tmp/bits-before /tmp/bits-after

@@ -6,8 +6,8 @@ of every object in it, each case's JSON summary, and the folder's ``sweep.json``
 
 Usage::
 
-    PYTHONPATH=/work/before python -m mdgran sweep paper-robustness --backend fast --out /tmp/a
-    PYTHONPATH=/work/after python -m mdgran sweep paper-robustness --backend fast --out /tmp/b
+    PYTHONPATH=../mdgran-before python -m mdgran sweep paper-robustness --backend fast --out /tmp/a
+    PYTHONPATH=. python -m mdgran sweep paper-robustness --backend fast --out /tmp/b
     python reference/compare_sweeps.py /tmp/a /tmp/b
 
 Prints one line per differing case (and a count) and exits 1 if anything differs or is

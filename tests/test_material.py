@@ -28,7 +28,8 @@ def silica_from_docs() -> str:
 
 
 def lambda_by_hand(d, E, nu, w, D0=0.165e-9):
-    """physics.md: lambda = 2.06 / D0 (R w^2 / (pi K^2))^(1/3), R = d/4, K = E / (2 (1 - nu^2))."""
+    """docs/model.md, Units: lambda = 2.06 / D0 (R w^2 / (pi K^2))^(1/3), R = d/4,
+    K = E / (2 (1 - nu^2))."""
     K = E / (2.0 * (1.0 - nu * nu))
     return 2.06 / D0 * ((d / 4.0) * w * w / (math.pi * K * K)) ** (1.0 / 3.0)
 
@@ -219,7 +220,7 @@ def test_scales_attributes_are_the_info_keys():
     assert s.time_unit_s == s.time and s.eta_N == s.eta and s.p_m == s.p
     info = scene_info(load_scene("micro-star"))
     for k in ("eta_N", "p_m", "stiffness_scale_N_per_m", "damping_scale_Ns_per_m",
-              "time_unit_s", "maugis_lambda"):  # contract.md's documented info keys
+              "time_unit_s", "maugis_lambda"):  # docs/cli.md's documented info keys
         assert info[k] == getattr(s, k)
 
 

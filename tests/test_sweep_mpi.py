@@ -1,4 +1,4 @@
-"""The sweep on MPI ranks (``--executor mpi``, mpi4py.futures), launched as the README says:
+"""The sweep on MPI ranks (``--executor mpi``, mpi4py.futures), launched as docs/cli.md says:
 
     mpiexec -n 3 python -m mpi4py.futures "$(command -v mdgran)" sweep SWEEP --executor mpi ...
 
