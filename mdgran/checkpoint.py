@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -130,6 +131,29 @@ def save(f, state: dict, *, backend: str, scene_toml: str, frames: int, events: 
     if data.blocks:
         meta["data_digest"] = BLOCKS
     g.attrs["meta"] = json.dumps(meta)
+
+
+@dataclass(frozen=True)
+class Resumed:
+    """What a run resumed from a checkpoint goes on from: the backend's ``state`` (handed
+    back to :meth:`~mdgran.backends.base.Backend.blocks`), the first frame's total energy
+    ``e0``, the largest ``|E - E0|`` over the frames before it (``max_error``, units eta p)
+    and the largest ``|ledger term|`` (``term_max``: the round-off floor's scale)."""
+
+    state: dict
+    e0: float
+    max_error: float
+    term_max: float
+
+
+def resumed(state: dict, ledger: dict) -> Resumed:
+    """:class:`Resumed` from the checkpoint's ``state`` and the ledger series written before
+    it (``{term: [frames] array}``, ``total_energy`` among them)."""
+    tot = np.asarray(ledger["total_energy"], dtype=float)
+    if not len(tot):
+        return Resumed(state, float("nan"), 0.0, 0.0)
+    return Resumed(state, float(tot[0]), float(np.max(np.abs(tot - tot[0]))),
+                   max(float(np.max(np.abs(np.asarray(v)))) for v in ledger.values()))
 
 
 def has_checkpoint(path) -> bool:

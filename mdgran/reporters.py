@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-import time as _time
 from functools import lru_cache
 from pathlib import Path
 
@@ -184,28 +183,30 @@ class H5MDWriter:
     Every contact's state per frame is stored (``/observables/contacts/closed``, from each
     frame's ``closed``); ``contacts`` (default: the scene's ``output.contacts``) adds the
     per-contact time series ``/observables/contacts/{compression,force}``
-    (:data:`CONTACT_SERIES`), computed from each frame's ``x``, ``v`` and ``closed`` with the
-    scene's :class:`~mdgran.chain.ChainModel`.  ``/parameters`` attribute ``mpi_ranks``
-    records the number of MPI ranks the run was split over (:meth:`mpi_ranks_of`; ``backend``, default
-    the object whose method ``state_source`` is, tells which backend ran)."""
+    (:data:`CONTACT_SERIES`), as each block gives them
+    (:meth:`~mdgran.backends.base.Frames.contact_series`).  The writer computes nothing: the
+    chain's numbering comes from ``model`` (the backend's :class:`~mdgran.chain.ChainModel`;
+    default: the scene's), the checkpoints from the driver (:meth:`checkpoint`).
+    ``/parameters`` attribute ``mpi_ranks`` records the number of MPI ranks the run was
+    split over (:meth:`mpi_ranks_of` of ``backend``, the backend that ran)."""
 
     def __init__(self, path, scene, backend_name: str, positions: bool | None = None,
-                 stats_source=None, checkpoint_every: float | None = None, state_source=None,
-                 resume: bool = False, contacts: bool | None = None, backend=None):
-        """``checkpoint_every`` (seconds of wall time) makes the run resumable: the file is
-        filled under the fixed name ``NAME.h5.partial`` with a checkpoint (the backend's
-        ``state_source()`` at the last written frame; :mod:`mdgran.checkpoint`), which an
-        interrupted or killed run leaves behind; ``resume=True`` verifies it (backend, scene,
-        checksums), drops the frames written after it, and exposes the state as
-        ``resume_state``.  Without ``resume``, an existing ``NAME.h5.partial`` is refused
-        rather than overwritten (:class:`~mdgran.checkpoint.CheckpointError`)."""
+                 stats_source=None, checkpoint_every: float | None = None,
+                 resume: bool = False, contacts: bool | None = None, backend=None, model=None):
+        """``checkpoint_every`` (seconds of wall time, or None) makes the run resumable: the
+        file is filled under the fixed name ``NAME.h5.partial``, where :meth:`checkpoint`
+        stores the backend's state at the last written frame (:mod:`mdgran.checkpoint`), and
+        which an interrupted or killed run leaves behind; ``resume=True`` verifies it (backend,
+        scene, checksums), drops the frames written after it, and gives what the run goes on
+        from as ``resumed`` (:class:`~mdgran.checkpoint.Resumed`).  Without ``resume``, an
+        existing ``NAME.h5.partial`` is refused rather than overwritten
+        (:class:`~mdgran.checkpoint.CheckpointError`)."""
         import h5py
 
         self.path = Path(path)
         if self.path.is_symlink():  # write where the link points; the link stays
             self.path = Path(os.path.realpath(self.path))
         self.checkpoint_every = checkpoint_every
-        self.state_source = state_source
         self.backend_name = backend_name
         partial = self.path.with_name(f"{self.path.name}.partial")
         if checkpoint_every is not None or (resume and partial.exists()):
@@ -222,9 +223,8 @@ class H5MDWriter:
         self.filters = COMPRESSION[out.get("compression", "none")]
         self.bead_ids = stored_beads(self.model_n, self.stride)
         self._beads = slice(0, self.model_n, self.stride or 1)  # stored columns of x, v
-        self.model = None  # the scene's ChainModel (contact numbering, compressions, forces)
-        self.backend = backend if backend is not None else getattr(state_source, "__self__",
-                                                                   None)
+        self.model = model  # the chain's ChainModel (contact numbering)
+        self.backend = backend
         self.mpi_ranks = None  # known once the backend has started (first frame)
         self.stats_source = stats_source
         self.f = None
@@ -236,14 +236,10 @@ class H5MDWriter:
         self._events = []
         self._frames = 0
         self._last_step = None
-        self._last_checkpoint = _time.perf_counter()
         # running checksums of the written rows, for checkpoints only (at 1e6 beads hashing
         # costs ~0.1 s per frame)
         self._digest = checkpoint.DataDigest() if checkpoint_every is not None else None
-        self.resume_state = None
-        self.resume_e0 = None
-        self.resume_max_error = 0.0
-        self.resume_term_max = 0.0  # largest |ledger term| so far (the round-off floor's scale)
+        self.resumed = None  # checkpoint.Resumed of a resumed run
         try:
             if resume and self.tmp.exists():
                 self._resume()
@@ -284,11 +280,12 @@ class H5MDWriter:
         state, meta, digest = checkpoint.load(
             self.tmp, backend=self.backend_name, scene_toml=self.scene.to_toml(),
             counts=self._rows)
-        self.resume_state = state
         self._digest = digest
         self._frames = int(meta["frames"])
         self.f = self._guard(h5py.File, self.tmp, "r+")
         self._guard(self._open_existing, int(meta["events"]))
+        self.resumed = checkpoint.resumed(
+            state, {k: self._series[k]["value"][()] for k in self.terms})
 
     def frame_bytes(self) -> int:
         """Bytes of per-bead and per-contact values one frame adds to the buffer: x and v of
@@ -343,11 +340,6 @@ class H5MDWriter:
         self._ev = {k: f[f"events/{k}"] for k in ("time", "contact", "kind")}
         for ds in self._ev.values():
             ds.resize(events, axis=0)
-        tot = self._series["total_energy"]["value"][()]
-        self.resume_e0 = float(tot[0])
-        self.resume_max_error = float(np.max(np.abs(tot - tot[0]))) if len(tot) else 0.0
-        self.resume_term_max = max((float(np.max(np.abs(self._series[k]["value"][()])))
-                                    for k in self.terms if len(tot)), default=0.0)
         if self.positions:
             sc = self.scene.scales
             self._pos_scale, self._t_scale = (sc.p * 1e9, sc.time * 1e12) if sc else (1.0, 1.0)
@@ -528,10 +520,8 @@ class H5MDWriter:
             self.mpi_ranks = self.mpi_ranks_of(self.backend)
         per_contact = {"closed": block.closed}
         if self.contacts:
-            m, cols = self.model, self._cols
-            per_contact["compression"] = np.array([m.compressions(x)[cols] for x in block.x])
-            per_contact["force"] = np.array([m.contact_forces(x, v, c)[cols] for x, v, c in
-                                             zip(block.x, block.v, block.closed)])
+            per_contact.update({name: values[:, self._cols]
+                                for name, values in block.contact_series().items()})
         x, v = block.x, block.v
         if self.stride != 1:  # copies of the stored beads (a view would keep all of them)
             x, v = x[:, self._beads], v[:, self._beads]
@@ -542,21 +532,22 @@ class H5MDWriter:
         self._last_step = int(block.step[-1])
         if self._buffered >= self._block:
             self._guard(self._flush)
-        if (self.checkpoint_every is not None
-                and _time.perf_counter() - self._last_checkpoint >= self.checkpoint_every):
-            self._guard(self.checkpoint)
 
-    def checkpoint(self):
-        """Flush every frame and store the backend's state at the last one."""
-        state = self.state_source() if self.state_source is not None else None
-        if state is None or self._last_step is None or state["i_out"] != self._last_step:
+    def checkpoint(self, state):
+        """Flush every frame and store ``state``, the backend's state at the last frame
+        written (:meth:`~mdgran.backends.base.Backend.checkpoint_state`); nothing when it is
+        None or the state of another frame."""
+        if (self.f is None or state is None or self._last_step is None
+                or state["i_out"] != self._last_step):
             return
+        self._guard(self._save_checkpoint, state)
+
+    def _save_checkpoint(self, state):
         self._flush()
         checkpoint.save(self.f, state, backend=self.backend_name,
                         scene_toml=self.scene.to_toml(), frames=self._frames,
                         events=int(self._ev["time"].shape[0]), data=self._digest)
         self.f.flush()
-        self._last_checkpoint = _time.perf_counter()
 
     def _append(self, path, series, steps, times, values, within=None):
         """Append rows to ``series``; a ``step`` or ``time`` shared with a series appended
@@ -680,14 +671,13 @@ class H5MDWriter:
 
     def close(self, status):
         """Finish the file: rename it onto the requested name unless interrupted (then keep
-        ``NAME.partial`` with a checkpoint at the last frame if checkpointing is on, or with the
+        ``NAME.partial`` with the last checkpoint stored if checkpointing is on, or with the
         checkpoint it was resumed from, else remove the temporary)."""
         if self.f is None:
             return
         try:
             if status == "interrupted":
                 if self.checkpoint_every is not None:  # keep NAME.partial to resume from
-                    self._guard(self.checkpoint)
                     if "checkpoint" not in self.f:  # before the first frame: nothing to keep
                         self.f.close()
                         self.tmp.unlink(missing_ok=True)

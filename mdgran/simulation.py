@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+import time as _time
 from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
@@ -236,6 +237,22 @@ def report(reporter, block) -> None:
         reporter.report(block.frame(k), block.ledger_row(k))
 
 
+class CheckpointClock:
+    """When a run stores a checkpoint: at the first block that ends ``every`` seconds of wall
+    time or more after the last one (None: never).  The driver decides and hands the writer
+    the backend's state (:meth:`~mdgran.reporters.H5MDWriter.checkpoint`)."""
+
+    def __init__(self, every: float | None):
+        self.every = every
+        self.restart()
+
+    def restart(self):
+        self.last = _time.perf_counter()
+
+    def due(self) -> bool:
+        return self.every is not None and _time.perf_counter() - self.last >= self.every
+
+
 def run(scene, backend: str = "reference", out=None, progress: bool = False, keep=True,
         reporters=(), raise_errors: bool = True, checkpoint_every: float | None = None,
         resume: bool = False, collective: bool = True, **options) -> RunResult:
@@ -257,76 +274,124 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     process runs a run of its own (a sweep case on an MPI worker rank) and writes its own ``out``
     whatever its rank.
     """
-    if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or not isinstance(
-            checkpoint_every, (int, float)) or not 0 <= checkpoint_every < math.inf):
-        raise SceneError("checkpoint_every", "must be a number of seconds >= 0, or None (no "
-                         f"checkpoints), not {checkpoint_every!r}")
+    _check_checkpoint_every(checkpoint_every)
     scene = scene.own_copy()  # the run's own: a later change to the caller's is not its
     writes = not collective or mpi_rank() == 0
     check_resources(scene, out if writes else None, keep)
     b = make_backend(scene, backend, **options)
-    model = b.model
-    reps = list(reporters)
-    mem = MemoryReporter() if keep else None
-    if mem is not None:
-        reps.append(mem)
-    writer = None
-    if not writes:  # a collective run under mpiexec: rank 0 alone writes and reports
-        out, progress = None, False
-    if out is not None:
-        if not b.can_checkpoint and not (resume and partial_path(out).exists()):
-            checkpoint_every = None  # nothing to checkpoint; a resume is refused by the writer
-        try:
-            writer = H5MDWriter(out, scene, b.name, backend=b, stats_source=lambda: b.stats,
-                                checkpoint_every=checkpoint_every,
-                                state_source=b.checkpoint_state, resume=resume)
-        except CheckpointError as exc:
-            raise SceneError("resume", str(exc)) from None
-        except OutputLocked as exc:
-            raise SceneError("out", str(exc)) from None
-        reps.append(writer)
-    start = writer.resume_state if writer is not None else None
-    if progress:
-        reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
-                                     label=f"{scene.name} [{b.name}]"))
-    e0 = writer.resume_e0 if start is not None else None
-    scale = ledger_scale(scene.energy_scale, 0.0 if e0 is None else e0)  # set again at E0
-    max_err = writer.resume_max_error / scale if start is not None else 0.0
-    term_max = writer.resume_term_max if start is not None else 0.0  # largest |ledger term|
+    # a collective run under mpiexec: rank 0 alone writes and shows progress
+    reps, mem, writer = _reporters(scene, b, reporters, keep, out if writes else None,
+                                   progress and writes, checkpoint_every, resume)
+    resumed = writer.resumed if writer is not None else None
+    watch = LedgerWatch(scene.energy_scale, resumed)
+    clock = CheckpointClock(writer.checkpoint_every if writer is not None else None)
     status, err = "complete", None
     try:
         # a signal while a frame goes to the reporters is held until all have it, so that a
         # checkpoint (the backend's state at its last frame) matches the frames written
         notice = CompileNotice(f"{scene.name} [{b.name}]") if progress else nullcontext()
         with notice, FrameSections() as sections:
-            for block in (b.blocks(resume=start) if start is not None else b.blocks()):
+            for block in b.blocks(resume=resumed.state) if resumed else b.blocks():
                 sections.inside = True
-                led = block.ledger()  # {term: [F]}, computed once for the block's frames
-                if e0 is None:
-                    e0 = float(led["total_energy"][0])
-                    scale = ledger_scale(scene.energy_scale, e0)
-                max_err = worst(max_err, np.abs(relative_ledger_error(led["total_energy"], e0,
-                                                                      scale)))
-                term_max = max(term_max, max(float(np.abs(c).max()) for c in led.values()))
+                watch.update(block.ledger())  # {term: [F]}, computed once for the block
                 for r in reps:
                     report(r, block)
+                if clock.due():
+                    writer.checkpoint(b.checkpoint_state())
+                    clock.restart()
                 sections.leave()
     except IntegrationError as exc:
         status, err = f"failed: {exc}", str(exc)
     except BaseException:
-        for r in reps:
-            r.close("interrupted")
+        _interrupted(reps, writer if clock.every is not None else None, b)
         raise
-    bound = b.ledger_bound(scale, term_max)
-    if err is None and not max_err <= bound:  # a NaN error is not within any bound
-        status = ledger_status(max_err, bound)
-    b.stats["max_ledger_error_rel"] = max_err
+    bound = b.ledger_bound(watch.scale, watch.term_max)
+    status = watch.status(status, bound)
+    b.stats["max_ledger_error_rel"] = watch.max_err
     b.stats["ledger_bound_rel"] = bound
     for r in reps:
         r.close(status)
     result = RunResult(
-        trajectory=mem.record(scene, b.name) if mem is not None else None,
-        stats=b.stats, status=status, max_ledger_error=max_err, error=err, ledger_bound=bound)
+        trajectory=mem.record(scene, b.name) if mem is not None else None, stats=b.stats,
+        status=status, max_ledger_error=watch.max_err, error=err, ledger_bound=bound)
     if err is not None and raise_errors:
         raise IntegrationError(err)
     return result
+
+
+def _reporters(scene, backend, reporters, keep, out, progress, checkpoint_every, resume):
+    """``(reporters, memory, writer)``: the caller's reporters, then a
+    :class:`MemoryReporter` (``keep``; else None), the H5MD writer (``out``; else None) and
+    a progress line (``progress``), in the order they see each block."""
+    reps = list(reporters)
+    mem = MemoryReporter() if keep else None
+    writer = (_open_writer(out, scene, backend, checkpoint_every, resume)
+              if out is not None else None)
+    reps += [r for r in (mem, writer) if r is not None]
+    if progress:
+        reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
+                                     label=f"{scene.name} [{backend.name}]"))
+    return reps, mem, writer
+
+
+def _check_checkpoint_every(every):
+    if every is not None and (isinstance(every, bool) or not isinstance(every, (int, float))
+                              or not 0 <= every < math.inf):
+        raise SceneError("checkpoint_every", "must be a number of seconds >= 0, or None (no "
+                         f"checkpoints), not {every!r}")
+
+
+def _open_writer(out, scene, backend, checkpoint_every, resume) -> H5MDWriter:
+    """The run's H5MD writer (checkpoints only where the backend can make them; a resume of
+    a backend that cannot is refused by the writer); a refusal is a SceneError."""
+    if not backend.can_checkpoint and not (resume and partial_path(out).exists()):
+        checkpoint_every = None
+    try:
+        return H5MDWriter(out, scene, backend.name, backend=backend, model=backend.model,
+                          stats_source=lambda: backend.stats,
+                          checkpoint_every=checkpoint_every, resume=resume)
+    except CheckpointError as exc:
+        raise SceneError("resume", str(exc)) from None
+    except OutputLocked as exc:
+        raise SceneError("out", str(exc)) from None
+
+
+def _interrupted(reps, writer, backend):
+    """An interrupted run: a checkpoint at the last frame ``writer`` (None: no checkpoints)
+    holds, then every reporter closed as interrupted."""
+    try:
+        if writer is not None:
+            writer.checkpoint(backend.checkpoint_state())
+    finally:
+        for r in reps:
+            r.close("interrupted")
+
+
+class LedgerWatch:
+    """The run's ledger error as frames come: ``max_err = max |E - E0| / scale`` (NaN once
+    any error is NaN) with ``scale`` from the scene's energy scale and ``E0`` (the first
+    frame's total energy; a resumed run's from its checkpoint), and ``term_max``, the largest
+    ``|ledger term|`` (the round-off floor's scale)."""
+
+    def __init__(self, energy_scale: float, resumed=None):
+        self.energy_scale = energy_scale
+        self.e0 = resumed.e0 if resumed is not None else None
+        self.scale = ledger_scale(energy_scale, 0.0 if self.e0 is None else self.e0)
+        self.max_err = resumed.max_error / self.scale if resumed is not None else 0.0
+        self.term_max = resumed.term_max if resumed is not None else 0.0
+
+    def status(self, status: str, bound: float) -> str:
+        """``status`` of a complete run whose error exceeds ``bound`` becomes
+        ``ledger-exceeded: ...`` (a NaN error is not within any bound); any other stays."""
+        if status == "complete" and not self.max_err <= bound:
+            return ledger_status(self.max_err, bound)
+        return status
+
+    def update(self, led: dict):
+        """Take in a block's ledger ``{term: [F]}``."""
+        if self.e0 is None:
+            self.e0 = float(led["total_energy"][0])
+            self.scale = ledger_scale(self.energy_scale, self.e0)
+        errors = np.abs(relative_ledger_error(led["total_energy"], self.e0, self.scale))
+        self.max_err = worst(self.max_err, errors)
+        self.term_max = max(self.term_max, max(float(np.abs(c).max()) for c in led.values()))

@@ -103,7 +103,7 @@ class Frames:
 
     __slots__ = ("model", "step", "time", "x", "v", "closed", "dissipated_viscous",
                  "dissipated_hysteresis", "external_work", "events", "event_ends",
-                 "moved", "_ledger", "_rows")
+                 "moved", "_ledger", "_rows", "_contacts")
 
     def __init__(self, model, step, time, x, v, closed, dissipated_viscous,
                  dissipated_hysteresis, external_work, events, event_ends, ledger=None,
@@ -115,7 +115,7 @@ class Frames:
         self.dissipated_hysteresis = dissipated_hysteresis
         self.external_work = external_work
         self.events, self.event_ends = events, event_ends
-        self._ledger, self._rows = ledger, None
+        self._ledger, self._rows, self._contacts = ledger, None, None
 
     @classmethod
     def of(cls, frame: Frame, model) -> "Frames":
@@ -137,6 +137,19 @@ class Frames:
                 self.x, self.v, self.closed, self.dissipated_viscous,
                 self.dissipated_hysteresis, self.external_work, t, moved=self.moved)
         return self._ledger
+
+    def contact_series(self) -> dict:
+        """``{"compression": [F, n_contacts], "force": [F, n_contacts]}``: each frame's
+        contact compressions and forces (:meth:`~mdgran.chain.ChainModel.compressions`,
+        :meth:`~mdgran.chain.ChainModel.contact_forces`: the force the backend integrates),
+        computed on first use."""
+        if self._contacts is None:
+            m = self.model
+            self._contacts = {
+                "compression": np.array([m.compressions(x) for x in self.x]),
+                "force": np.array([m.contact_forces(x, v, c)
+                                   for x, v, c in zip(self.x, self.v, self.closed)])}
+        return self._contacts
 
     def ledger_row(self, k: int) -> dict:
         """Frame ``k``'s ledger as :meth:`~mdgran.chain.ChainModel.ledger` gives it (floats)."""
