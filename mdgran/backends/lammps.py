@@ -1,4 +1,4 @@
-"""The LAMMPS backend: the same scenes run in LAMMPS (``lammps_inputs/chain.in``).
+"""The LAMMPS backend: the same scenes run in LAMMPS (``mdgran/lammps_inputs/chain.in``).
 
 LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the contact (law,
 hysteresis, unilateral damping) and the substrate (``chain.in``'s ``fix spring/self`` tether
@@ -89,7 +89,8 @@ from ..signals import deferred
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
                    check_excitation_steps)
 
-INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
+#: the LAMMPS input the backend starts from (package data: in the checkout and in the wheel)
+INPUT = Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
 GHOST_SPACINGS = 2.5
 #: ... and with located events on several ranks: each rank steps the event windows that write
@@ -116,13 +117,6 @@ def _event_mode(events, contact):
         raise SceneError("events", "'located' needs contact='native' (the Python hook switches "
                          "contacts at step ends: events='quantized')")
     return events
-
-
-def input_file() -> Path:
-    """``lammps_inputs/chain.in`` of the checkout, or the copy installed with the package."""
-    if INPUT.exists():
-        return INPUT
-    return Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
 
 
 class _AtomViews:
@@ -258,7 +252,7 @@ class LammpsBackend(Backend):
                      "thermo_every": max(1, self.steps_per_frame)}
         for k, v in variables.items():
             lmp.command(f"variable {k} equal {v}")
-        lmp.file(str(input_file()))
+        lmp.file(str(INPUT))
         for cmd in self.extra_commands:  # e.g. "atom_modify sort 1 0.5" in the tests
             lmp.command(cmd)
         self.lmp = lmp
