@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .backends.base import steps_per_frame
 from .contact import FC_DMT, FC_JKR, ContactLaw
 from .lammps_env import new_lammps
 from .units import ALUMINA, Scales, contact_modulus
@@ -242,9 +243,7 @@ def run_native(scene, dt: float | None = None, duration: float | None = None,
     dt = float(dt if dt is not None else d["run"]["dt"])
     duration = float(duration if duration is not None else d["run"]["duration"])
     interval = float(d["run"]["output_interval"])
-    per_frame = int(round(interval / dt))
-    if abs(per_frame * dt - interval) > 1e-9 * interval:
-        raise ValueError(f"dt = {dt} must divide run.output_interval = {interval}")
+    per_frame = steps_per_frame(dt, interval)
     frames = int(round(duration / interval))
     chain = NativeChain(scene, dt, mapping)
     # events are read off the atom force, which is the pair force alone without a tether

@@ -29,6 +29,21 @@ class OutputLocked(ValueError):
     """Another run is writing the same output name: one line (exit status 2)."""
 
 
+def temporary_path(path) -> Path:
+    """``NAME.tmp-PID`` beside the file ``NAME``: where this process writes it before renaming it
+    onto ``NAME`` (a sweep removes the ``*.tmp-*`` a killed writer left)."""
+    path = Path(path)
+    return path.with_name(f"{path.name}.tmp-{os.getpid()}")
+
+
+def write_atomic(path, text: str):
+    """Write ``text`` to ``path`` through :func:`temporary_path` and a rename: a reader sees the
+    old file or the whole new one, never a part."""
+    tmp = temporary_path(path)
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def lock_path(path) -> Path:
     path = Path(path)
     return path.with_name(f"{path.name}.lock")

@@ -98,7 +98,7 @@ from pathlib import Path
 
 from .scene import SceneError, builtin_scenes, load_scene, read_toml
 from .run_record import unreadable
-from .storage import OutputLock, OutputLocked
+from .storage import OutputLock, OutputLocked, write_atomic
 from .signals import interrupting
 
 SWEEP_DIR = Path(__file__).parent / "sweeps"
@@ -234,9 +234,8 @@ def _realization_cases(scene: str, grid_cases: list, n_real: int, eps: float) ->
 
 
 def _atomic_json(path: Path, obj):
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(obj, indent=1, default=float) + "\n")
-    os.replace(tmp, path)
+    """``obj`` as JSON (one space indent, numpy numbers as floats), written atomically."""
+    write_atomic(path, json.dumps(obj, indent=1, default=float) + "\n")
 
 
 def case_summary(result) -> dict:

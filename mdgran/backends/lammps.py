@@ -87,7 +87,7 @@ from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
-                   check_excitation_steps)
+                   check_excitation_steps, steps_per_frame)
 
 #: the LAMMPS input the backend starts from (package data: in the checkout and in the wheel)
 INPUT = Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
@@ -196,11 +196,7 @@ class LammpsBackend(Backend):
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
-        interval = float(run["output_interval"])
-        self.steps_per_frame = int(round(interval / self.dt))
-        if abs(self.steps_per_frame * self.dt - interval) > 1e-9 * interval:
-            raise SceneError("run.dt", f"must divide run.output_interval = {interval} "
-                             f"(dt = {self.dt})")
+        self.steps_per_frame = steps_per_frame(self.dt, float(run["output_interval"]))
         check_excitation_steps(self.model, self.dt, self.name)
         self.comm = comm
         m = self.model
