@@ -250,7 +250,7 @@ class H5MDWriter:
             else:
                 if checkpoint_every is not None and self.tmp.exists():
                     raise checkpoint.CheckpointError(
-                        f"{self.tmp} holds an unfinished run: resume it (--resume), or delete "
+                        f"{self.tmp} holds an unfinished run: resume it (resume=True), or delete "
                         "it to start afresh")
                 self.f = self._guard(lambda: h5py.File(self.tmp, "w", libver=H5_LIBVER))
                 self._guard(self._init_file, backend_name)

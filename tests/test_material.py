@@ -205,7 +205,7 @@ def test_mapping_errors_name_the_key(bad, key):
 
 
 def test_load_scene_refuses_other_types():
-    with pytest.raises(SceneError, match=r"^SCENE: must be a built-in scene name"):
+    with pytest.raises(SceneError, match=r"^scene: must be a built-in scene name"):
         load_scene(42)
 
 
