@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import mdgran
-from mdgran import native_plugin
+from mdgran.backends import native_plugin
 from mdgran.backends import lammps as lammps_backend
 from mdgran.scene import SCENE_DIR
 from mdgran.sweep import SWEEP_DIR

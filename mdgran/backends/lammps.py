@@ -42,9 +42,9 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
 * **Native contact** (``contact="native"``): the same contact as ``fix mdgran/chain`` of the
-  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.native_plugin`), in place of the hook: same law
-  (the same spline coefficients, handed over in a file), same switching rule, same operations
-  in the same order as the compiled hook, so the two agree bitwise on 1 and 2 ranks
+  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.backends.native_plugin`), in place of the hook:
+  same law (the same spline coefficients, handed over in a file), same switching rule, same
+  operations in the same order as the compiled hook, so the two agree bitwise on 1 and 2 ranks
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
@@ -80,12 +80,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import native_plugin
 from ..chain import first_contact
 from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
+from . import native_plugin
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, IntegrationError,
                    check_excitation_steps, steps_per_frame)
 
