@@ -1,4 +1,4 @@
-"""The Python API (issue 16): ``mdgran.run``/``read``/``scenes``/``load_scene``/``Scene``, short
+"""The Python API: ``mdgran.run``/``read``/``scenes``/``load_scene``/``Scene``, short
 reprs, errors that name Python parameters, and a light ``import mdgran``."""
 import math
 import os

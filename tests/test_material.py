@@ -1,4 +1,4 @@
-"""Scenes in SI that mean what they say (issue 16): a [material] derives lambda, is complete or
+"""Scenes in SI that mean what they say: a [material] derives lambda, is complete or
 an error, SI keys follow one rule, load_scene takes mappings and Scenes, and the key reference
 docs/scene_keys.md is generated from the schema."""
 import json
