@@ -469,21 +469,3 @@ def test_sigterm_while_the_kernel_compiles_stops_the_run(tmp_path):
     assert code == 143 and len(err) == 1 and "nothing was kept" in err[0], err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["numba-cache"]
 
-
-@pytest.mark.parametrize("backend", ["reference", "fast"])
-def test_interrupt_before_the_first_frame_with_checkpoints(tmp_path, monkeypatch, backend):
-    """Ctrl-C before the first frame (a first compile takes 15-25 s) with checkpoints on: the
-    interrupt propagates as itself (it was a TypeError of the checkpoint, a traceback), and
-    nothing is left to resume from: no output, no NAME.partial."""
-    from mdgran.chain import ChainModel
-    from mdgran.scene import load_scene
-    from mdgran.simulation import run
-
-    def stop(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(ChainModel, "initial_state", stop)
-    out = tmp_path / "r.h5"
-    with pytest.raises(KeyboardInterrupt):
-        run(load_scene("micro-star"), backend, out=out, checkpoint_every=0.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == []
