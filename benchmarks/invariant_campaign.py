@@ -1,5 +1,5 @@
 """Randomized invariant campaign: many short random scenes on the reference and fast backends,
-every frame checked against the state invariant (mdgran.invariants).
+every frame checked against the state invariant (benchmarks/invariants.py).
 
     python benchmarks/invariant_campaign.py [--scenes 3000] [--seed 1] [--long 4]
         [--backends reference,fast] [--workers 1] [--records FILE.jsonl]
@@ -28,8 +28,8 @@ Scene families (overrides of the built-in ``collision-pair`` scene, or ``micro-s
 * ``long_snapoff`` (``--long``): micro-star-like chains of 20 beads over 50-100 time units,
   displacement rule, many snap-offs near the square-root singularity.
 
-To check old code, put its checkout first on PYTHONPATH (with this checkout's
-mdgran/invariants.py copied into it): ``PYTHONPATH=/tmp/old python benchmarks/...``.
+To check old code, put its checkout first on PYTHONPATH (the invariants are this checkout's,
+benchmarks/invariants.py beside this script): ``PYTHONPATH=/tmp/old python benchmarks/...``.
 Progress goes to stderr; the JSON has counts, and every violating scene's overrides so that it
 can be rerun with ``mdgran run collision-pair --set KEY=VALUE ...``.
 """
@@ -47,9 +47,10 @@ import numpy as np
 
 import mdgran
 from mdgran.contact import law_from_contact_table
-from mdgran.invariants import check_run, matched_events
 from mdgran.scene import load_scene
 from mdgran.simulation import LEDGER_EXCEEDED
+
+from invariants import check_run, matched_events  # benchmarks/invariants.py
 
 RESULTS = Path(__file__).parent / "results"
 #: fast backend step: at most this / (1 + |v0|)^0.5 (stiffer contacts at larger impulses)

@@ -3,7 +3,7 @@
     python benchmarks/lammps_native.py
 
 1. Force laws: LAMMPS ``jkr``, ``dmt`` and ``hertz/material`` against mdgran's laws at the
-   mapped parameters (mdgran/native_lammps.py), and where LAMMPS's jkr lets go.
+   mapped parameters (benchmarks/native_lammps.py), and where LAMMPS's jkr lets go.
 2. JKR pair collisions (collision-pair scene, law jkr, snap_off "force") at impact speeds
    that bounce (3.0), bounce only under the force rule (2.0) and stick (1.2), at three dt,
    against the reference backend; the same LAMMPS runs against the reference with the
@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran import native_lammps as nl
 from mdgran.lammps_env import lammps_version
 from mdgran.scene import load_scene
 from mdgran.simulation import run
+
+import native_lammps as nl  # benchmarks/native_lammps.py
 
 PAIR_SPEEDS = (3.0, 2.0, 1.2)
 PAIR_DTS = (2e-3, 1e-3, 5e-4)

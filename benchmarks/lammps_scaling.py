@@ -3,7 +3,7 @@
     python benchmarks/lammps_scaling.py                       # the whole matrix below
     python benchmarks/lammps_scaling.py --sizes 1e4 --ranks 1 --repeats 2   # a quick try
 
-Cases (micro-star's physics with N beads, lammps_inputs/chain.in as the backend sets it up):
+Cases (micro-star's physics with N beads, mdgran/lammps_inputs/chain.in as the backend sets it up):
 
 * ``none``        no contact (``unfix contact``): LAMMPS's own cost with chain.in's fix nve and
                   fix spring/self (put back where the backend took it out), the floor;

@@ -24,14 +24,6 @@ from collections.abc import Mapping
 RUN_KEYWORDS = ("set", "progress", "keep", "reporters", "raise_errors", "checkpoint_every",
                 "resume", "collective")
 
-#: command-line names that the driver's errors may carry as their key -> the Python parameter
-_FLAG_TO_PARAMETER = {"SCENE": "scene", "--backend": "backend", "--out": "out",
-                      "--resume": "resume", "--checkpoint": "checkpoint_every"}
-#: ... and in their text (longest first)
-_FLAG_TEXT = {"--checkpoint": "checkpoint_every", "--backend": "backend", "--resume": "resume=True",
-              "--out": "out"}
-
-
 def scenes() -> list:
     """Names of the built-in scenes (``mdgran scenes`` prints them with a description)."""
     from .scene import builtin_scenes
@@ -96,33 +88,17 @@ def as_scene(scene, overrides=()):
 
 
 def _check_out(out, scene) -> str:
-    """The command line's up-front checks of ``out`` (a writable file name), naming ``out``."""
-    from .cli import UsageError, check_out_file
+    """``out`` as a path, refused up front (:func:`~mdgran.storage.check_out_file`) where the
+    run could not write it at its end."""
     from .scene import SceneError
+    from .storage import check_out_file
 
     if not isinstance(out, (str, os.PathLike)):
         raise SceneError("out", f"must be a path to an .h5 file or None, not "
                          f"{type(out).__name__}")
     out = os.fspath(out)
-    spec = os.fspath(scene) if isinstance(scene, (str, os.PathLike)) else None
-    try:
-        check_out_file(out, spec, key="out")
-    except UsageError as exc:
-        raise SceneError("out", str(exc).removeprefix("out: ")) from None
+    check_out_file(out, os.fspath(scene) if isinstance(scene, (str, os.PathLike)) else None)
     return out
-
-
-def _python_names(exc):
-    """``exc`` (a SceneError) with command-line names replaced by the parameters' names."""
-    from .scene import SceneError
-
-    key = _FLAG_TO_PARAMETER.get(exc.key)
-    text = str(exc).removeprefix(f"{exc.key}: ")
-    changed = key is not None
-    for flag, name in _FLAG_TEXT.items():
-        if flag in text:
-            text, changed = text.replace(flag, name), True
-    return SceneError(key or exc.key, text) if changed else exc
 
 
 def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool = False,
@@ -157,7 +133,6 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
     ``status = "ledger-exceeded: ..."`` (not raised): check ``result.status == "complete"``.
     """
     from .backends import get_backend
-    from .scene import SceneError
     from .simulation import BackendUnavailable, spec_of
     from .simulation import run as simulate
 
@@ -177,16 +152,12 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
                         f" {names}; backend {backend!r} takes "
                         f"{', '.join(accepted) or 'no options'}, and run() takes "
                         f"{', '.join(RUN_KEYWORDS)}{hint}")
-    try:
-        sc = as_scene(scene, _overrides(set))
-        if out is not None:
-            out = _check_out(out, scene)
-        result = simulate(sc, backend, out=out, progress=progress, keep=keep,
-                          reporters=reporters, raise_errors=raise_errors,
-                          checkpoint_every=checkpoint_every, resume=resume,
-                          collective=collective, **options)
-    except SceneError as exc:
-        raise _python_names(exc) from None
+    sc = as_scene(scene, _overrides(set))
+    if out is not None:
+        out = _check_out(out, scene)
+    result = simulate(sc, backend, out=out, progress=progress, keep=keep, reporters=reporters,
+                      raise_errors=raise_errors, checkpoint_every=checkpoint_every,
+                      resume=resume, collective=collective, **options)
     if result.trajectory is not None:
         result.trajectory.attrs.setdefault("scene_name", sc.name)
     return result

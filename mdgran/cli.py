@@ -7,7 +7,8 @@ whose energy-ledger error exceeds its backend's declared bound (status ``ledger-
 one line on stderr; every frame is in the file) and a sweep with any case not complete.
 Heavy imports are done inside the subcommands so that ``mdgran scenes`` starts fast.
 
-``--out`` is checked before anything runs (:func:`check_out_file`, :func:`check_out_dir`): a
+``--out`` is checked before anything runs (:func:`~mdgran.storage.check_out_file`,
+:func:`~mdgran.storage.check_out_dir`): a
 file name for ``run`` (not empty, not a folder, not ending in ``/``: a trailing slash is refused,
 not taken as a folder to put a file in; not the scene file itself; in a folder that exists or
 can be created and is writable; short enough for the temporary ``NAME.tmp-PID`` and
@@ -23,6 +24,8 @@ import math
 import os
 import sys
 
+from .storage import check_out_dir, check_out_file
+
 
 class UsageError(Exception):
     pass
@@ -36,74 +39,6 @@ class _Parser(argparse.ArgumentParser):
 def _fail(message: str, status: int) -> int:
     print(f"mdgran: error: {message}", file=sys.stderr)
     return status
-
-
-#: longest suffix H5MDWriter puts after the output file's name (".tmp-" + a pid; ".partial")
-TMP_SUFFIX = len(".tmp-") + 10
-
-
-def _existing_ancestor(path):
-    from pathlib import Path
-
-    p = Path(path).absolute()
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    return p
-
-
-def _name_max(folder) -> int:
-    try:
-        return int(os.pathconf(folder, "PC_NAME_MAX"))
-    except (OSError, ValueError, AttributeError):
-        return 255
-
-
-def _check_creatable(out: str, key: str):
-    """The first existing folder on ``out``'s way is a writable folder; no name is too long."""
-    from pathlib import Path
-
-    anc = _existing_ancestor(Path(out).absolute().parent)
-    if not anc.is_dir():
-        raise UsageError(f"{key}: {str(anc)!r} is a file, so {out!r} cannot be created in it")
-    if not os.access(anc, os.W_OK | os.X_OK):
-        raise UsageError(f"{key}: cannot create {out!r}: folder {str(anc)!r} is not writable")
-    limit = _name_max(anc)
-    for part in Path(out).parts:
-        if len(os.fsencode(part)) > limit:
-            raise UsageError(f"{key}: the name {part[:20]!r}... is {len(os.fsencode(part))} "
-                             f"bytes, the file system allows {limit}")
-    return limit
-
-
-def check_out_file(out: str, scene_spec: str | None = None, key: str = "--out"):
-    """Refuse up front an output file that the run could not write at its end."""
-    from pathlib import Path
-
-    if not out:
-        raise UsageError(f"{key}: must name an output file, e.g. run.h5")
-    p = Path(out)
-    if out.endswith(("/", os.sep)) or p.name in ("", ".", "..") or p.is_dir():
-        raise UsageError(f"{key}: {out!r} is a folder; give a file name, e.g. "
-                         f"{os.path.join(out, 'run.h5')}")
-    limit = _check_creatable(out, key)
-    if len(os.fsencode(p.name)) + TMP_SUFFIX > limit:
-        raise UsageError(f"{key}: the file name is {len(os.fsencode(p.name))} bytes; at most "
-                         f"{limit - TMP_SUFFIX} (room for the temporary .tmp-PID or .partial "
-                         f"suffix in the file system's {limit})")
-    if scene_spec and p.exists() and Path(scene_spec).is_file() and \
-            os.path.samefile(scene_spec, p):
-        raise UsageError(f"{key}: {out!r} is the scene file; give another name")
-
-
-def check_out_dir(out: str, key: str = "--out"):
-    """Refuse up front an output folder that cannot be made."""
-    from pathlib import Path
-
-    if not out:
-        raise UsageError(f"{key}: must name a folder")
-    if Path(out).exists() and not Path(out).is_dir():
-        raise UsageError(f"{key}: {out!r} is a file; give a folder")
-    _check_creatable(out, key)
 
 
 def _finite_or_none(obj):
@@ -426,17 +361,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-#: library parameter -> the command-line flag that sets it (errors name what the user typed)
-FLAGS = {"out": "--out", "resume": "--resume", "backend": "--backend",
-         "contact": "--contact", "events": "--events",
-         "executor": "--executor", "workers": "--workers"}
+#: library parameter -> the command-line flag or argument that sets it (errors name what the
+#: user typed)
+FLAGS = {"scene": "SCENE", "out": "--out", "out_dir": "--out", "resume": "--resume",
+         "backend": "--backend", "checkpoint_every": "--checkpoint", "contact": "--contact",
+         "events": "--events", "executor": "--executor", "workers": "--workers"}
+#: how the library's messages point at a parameter in their text -> the flag
+FLAG_TEXT = {"(resume=True)": "(--resume)", "(out)": "(--out)"}
 
 
 def flag_message(exc) -> str:
-    """A SceneError's line, with a library parameter's name replaced by its flag."""
+    """A SceneError's line with the library's parameter names replaced by the flags: its key,
+    and the parameters its text points at (:data:`FLAG_TEXT`)."""
     flag = FLAGS.get(getattr(exc, "key", None))
     text = str(exc)
-    return text if flag is None else flag + text[len(exc.key):]
+    if flag is not None:
+        text = flag + text[len(exc.key):]
+    for name, shown in FLAG_TEXT.items():
+        text = text.replace(name, shown)
+    return text
 
 
 def main(argv=None) -> int:

@@ -2,16 +2,11 @@
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
-
-def _atomic_write(path: Path, text: str):
-    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+from .storage import write_atomic
 
 
 def _adhesive(scene) -> bool:
@@ -255,8 +250,8 @@ def _markdown(scene, runs, report) -> str:
 
 def write_report(out: Path, scene, runs, pred, report, pairs):
     _figures(out, scene, runs, pred, report, pairs)
-    _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
-    _atomic_write(out / "report.md", _markdown(scene, runs, report))
+    write_atomic(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
+    write_atomic(out / "report.md", _markdown(scene, runs, report))
 
 
 def write_failure(out: Path, scene, report):
@@ -272,5 +267,5 @@ def write_failure(out: Path, scene, report):
                   "|---|---|---|---|"]
         lines += [f"| {name} | {r['status']} | {r['ledger_error']:.3g} | "
                   f"{r['ledger_bound']:.3g} |" for name, r in report["runs"].items()]
-    _atomic_write(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
-    _atomic_write(out / "report.md", "\n".join(lines) + "\n")
+    write_atomic(out / "report.json", json.dumps(report, indent=2, default=float) + "\n")
+    write_atomic(out / "report.md", "\n".join(lines) + "\n")

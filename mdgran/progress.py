@@ -29,6 +29,8 @@ import sys
 import time as _time
 from pathlib import Path
 
+from .storage import write_atomic
+
 TTY_INTERVAL = 0.2  # s between redraws on a terminal
 LOG_INTERVAL = 15.0  # s between lines elsewhere
 BAR = 20  # characters of a bar
@@ -399,12 +401,10 @@ class ProgressFile:
         self.ended = None
 
     def _write(self, **more):
-        tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
         try:
-            tmp.write_text(json.dumps({"t": self.t, "t_end": self.t_end, "wall":
-                                       _time.perf_counter() - self.start, "pid": os.getpid(),
-                                       **more}))
-            os.replace(tmp, self.path)
+            write_atomic(self.path, json.dumps({"t": self.t, "t_end": self.t_end, "wall":
+                                                _time.perf_counter() - self.start,
+                                                "pid": os.getpid(), **more}))
         except OSError:  # progress is not worth failing a case over
             pass
 

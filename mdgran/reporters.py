@@ -31,7 +31,7 @@ import numpy as np
 
 from . import checkpoint
 from .rest_blocks import BLOCK, block_mask, column_runs, lazy_zeros, sparse_width
-from .storage import OutputLock, StorageError, abandon, reason
+from .storage import OutputLock, StorageError, abandon, reason, temporary_path
 from .run_record import LEDGER_NAMES, Run, ledger_terms
 
 #: at most this many frames buffered in memory between writes (a run of micro-star, 4001
@@ -212,7 +212,7 @@ class H5MDWriter:
         if checkpoint_every is not None or (resume and partial.exists()):
             self.tmp = partial  # a resume without new checkpoints goes on in it all the same
         else:
-            self.tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
+            self.tmp = temporary_path(self.path)
         self.scene = scene
         self.model_n = int(scene.data["chain"]["n"])
         self.positions = scene.data["output"]["positions"] if positions is None else positions
@@ -246,7 +246,7 @@ class H5MDWriter:
             else:
                 if checkpoint_every is not None and self.tmp.exists():
                     raise checkpoint.CheckpointError(
-                        f"{self.tmp} holds an unfinished run: resume it (--resume), or delete "
+                        f"{self.tmp} holds an unfinished run: resume it (resume=True), or delete "
                         "it to start afresh")
                 self.f = self._guard(lambda: h5py.File(self.tmp, "w", libver=H5_LIBVER))
                 self._guard(self._init_file, backend_name)

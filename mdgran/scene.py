@@ -640,7 +640,7 @@ def _resolve(raw: dict):
     """``(data, sources)``: the resolved data and where each value came from (see
     :class:`Scene`)."""
     if not isinstance(raw, Mapping):
-        raise SceneError("SCENE", "a scene is a mapping of sections to tables")
+        raise SceneError("scene", "a scene is a mapping of sections to tables")
     for sec, table in raw.items():
         if sec not in SCHEMA:
             raise SceneError(str(sec), "unknown section; allowed: " + ", ".join(SCHEMA))
@@ -965,22 +965,22 @@ def load_scene(spec, overrides=(), name: str | None = None) -> Scene:
     if isinstance(spec, os.PathLike):
         spec = os.fspath(spec)
     if not isinstance(spec, str):
-        raise SceneError("SCENE", "must be a built-in scene name, a path to a .toml file, a "
+        raise SceneError("scene", "must be a built-in scene name, a path to a .toml file, a "
                          f"mapping or a Scene, not {type(spec).__name__}")
     scenes = builtin_scenes()
     try:
         spec.encode("utf-8")
     except UnicodeEncodeError:
-        raise SceneError("SCENE", f"{spec!r}: the path is not valid UTF-8 (the scene's name "
+        raise SceneError("scene", f"{spec!r}: the path is not valid UTF-8 (the scene's name "
                          "goes into the output file); rename the file") from None
     if spec in scenes:
         path, stem = scenes[spec], spec
     else:
         path, stem = Path(spec), Path(spec).stem
         if not path.suffix == ".toml" or not path.is_file():
-            raise SceneError("SCENE", f"{spec!r} is neither a built-in scene ("
+            raise SceneError("scene", f"{spec!r} is neither a built-in scene ("
                              + ", ".join(scenes) + ") nor a readable .toml file")
-    raw = _read_base_file(read_toml(path, "SCENE"), path.resolve().parent)
+    raw = _read_base_file(read_toml(path, "scene"), path.resolve().parent)
     return _make_scene(name or stem, apply_overrides(raw, overrides))
 
 

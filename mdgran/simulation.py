@@ -184,7 +184,7 @@ def check_resources(scene, out=None, keep: bool = True):
         if est["disk"] > free:
             raise SceneError("chain.n, run.output_interval",
                              f"{what} need at least {est['disk'] / gib:.3g} GiB on disk, "
-                             f"{free / gib:.3g} GiB are free at {where} (--out); make chain.n "
+                             f"{free / gib:.3g} GiB are free at {where} (out); make chain.n "
                              "smaller or run.output_interval larger")
 
 

@@ -29,6 +29,21 @@ class OutputLocked(ValueError):
     """Another run is writing the same output name: one line (exit status 2)."""
 
 
+def temporary_path(path) -> Path:
+    """``NAME.tmp-PID`` beside the file ``NAME``: where this process writes it before renaming it
+    onto ``NAME`` (a sweep removes the ``*.tmp-*`` a killed writer left)."""
+    path = Path(path)
+    return path.with_name(f"{path.name}.tmp-{os.getpid()}")
+
+
+def write_atomic(path, text: str):
+    """Write ``text`` to ``path`` through :func:`temporary_path` and a rename: a reader sees the
+    old file or the whole new one, never a part."""
+    tmp = temporary_path(path)
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def lock_path(path) -> Path:
     path = Path(path)
     return path.with_name(f"{path.name}.lock")
@@ -146,3 +161,77 @@ def abandon(h5file, tmp: Path, forget=lambda: None):
         tmp.unlink(missing_ok=True)
     except OSError:
         pass
+
+
+# ---- output names, checked before a run starts ----------------------------------------------
+#: longest suffix the HDF5 writer puts after the output file's name (".tmp-" + a pid; ".partial")
+TMP_SUFFIX = len(".tmp-") + 10
+
+
+def _refuse(key: str, message: str):
+    """Bad input naming the parameter ``key``: :class:`~mdgran.scene.SceneError` (exit status 2
+    on the command line, which names the flag instead)."""
+    from .scene import SceneError
+
+    return SceneError(key, message)
+
+
+def _existing_ancestor(path) -> Path:
+    p = Path(path).absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _name_max(folder) -> int:
+    """Longest file name (bytes) the file system of ``folder`` allows (255 if it does not say)."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+def _check_creatable(out: str, key: str) -> int:
+    """The first existing folder on ``out``'s way is a writable folder; no name is too long.
+    Returns the file system's longest name."""
+    anc = _existing_ancestor(Path(out).absolute().parent)
+    if not anc.is_dir():
+        raise _refuse(key, f"{str(anc)!r} is a file, so {out!r} cannot be created in it")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise _refuse(key, f"cannot create {out!r}: folder {str(anc)!r} is not writable")
+    limit = _name_max(anc)
+    for part in Path(out).parts:
+        if len(os.fsencode(part)) > limit:
+            raise _refuse(key, f"the name {part[:20]!r}... is {len(os.fsencode(part))} bytes, "
+                          f"the file system allows {limit}")
+    return limit
+
+
+def check_out_file(out: str, scene_spec: str | None = None, key: str = "out"):
+    """Refuse up front an output file that the run could not write at its end: empty, a folder
+    (or a name ending in ``/``), in a folder that cannot be created or written, a name too long
+    for its temporary, or the scene file ``scene_spec`` itself."""
+    if not out:
+        raise _refuse(key, "must name an output file, e.g. run.h5")
+    p = Path(out)
+    if out.endswith(("/", os.sep)) or p.name in ("", ".", "..") or p.is_dir():
+        raise _refuse(key, f"{out!r} is a folder; give a file name, e.g. "
+                      f"{os.path.join(out, 'run.h5')}")
+    limit = _check_creatable(out, key)
+    if len(os.fsencode(p.name)) + TMP_SUFFIX > limit:
+        raise _refuse(key, f"the file name is {len(os.fsencode(p.name))} bytes; at most "
+                      f"{limit - TMP_SUFFIX} (room for the temporary .tmp-PID or .partial "
+                      f"suffix in the file system's {limit})")
+    if scene_spec and p.exists() and Path(scene_spec).is_file() and \
+            os.path.samefile(scene_spec, p):
+        raise _refuse(key, f"{out!r} is the scene file; give another name")
+
+
+def check_out_dir(out: str, key: str = "out"):
+    """Refuse up front an output folder that cannot be made (empty, an existing file, in a
+    folder that cannot be written)."""
+    if not out:
+        raise _refuse(key, "must name a folder")
+    if Path(out).exists() and not Path(out).is_dir():
+        raise _refuse(key, f"{out!r} is a file; give a folder")
+    _check_creatable(out, key)

@@ -35,6 +35,7 @@ from . import analysis as an
 from . import paper_figures as pf
 from . import controls
 from .scene import load_scene
+from .storage import write_atomic
 from .run_record import read_h5
 
 FLAGSHIP = ("micro-star", "macro-hertz")
@@ -46,11 +47,6 @@ BEYOND = {"chain-100": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False
 #: (mdgran.long_chain, on the fast backend)
 BEYOND_STUDIES = ("long-chain",)
 
-
-def _atomic_write(path: Path, text: str):
-    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None,
@@ -320,8 +316,8 @@ def make_report(out, small: bool = False, workers: int | None = None,
             "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
             "not_complete": not_complete(bc) + bfailed,
             "backend": _folder_backend(bdir, backend)}
-    _atomic_write(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
-    _atomic_write(out / "report.md", markdown(numbers, cases, small))
+    write_atomic(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
+    write_atomic(out / "report.md", markdown(numbers, cases, small))
     say(f"report: {out / 'report.md'}")
     return numbers
 

@@ -98,7 +98,7 @@ from pathlib import Path
 
 from .scene import SceneError, builtin_scenes, load_scene, read_toml
 from .run_record import unreadable
-from .storage import OutputLock, OutputLocked
+from .storage import OutputLock, OutputLocked, write_atomic
 from .signals import interrupting
 
 SWEEP_DIR = Path(__file__).parent / "sweeps"
@@ -234,9 +234,8 @@ def _realization_cases(scene: str, grid_cases: list, n_real: int, eps: float) ->
 
 
 def _atomic_json(path: Path, obj):
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(obj, indent=1, default=float) + "\n")
-    os.replace(tmp, path)
+    """``obj`` as JSON (one space indent, numpy numbers as floats), written atomically."""
+    write_atomic(path, json.dumps(obj, indent=1, default=float) + "\n")
 
 
 def case_summary(result) -> dict:
@@ -629,7 +628,7 @@ def _mpi_executor(workers: int):
     try:
         from mpi4py.futures import MPIPoolExecutor
     except ImportError:
-        raise SceneError("--executor", "'mpi' needs mpi4py: pip install 'mdgran[mpi]'") \
+        raise SceneError("executor", "'mpi' needs mpi4py: pip install 'mdgran[mpi]'") \
             from None
     # under python -m mpi4py.futures the pool is the other ranks (max_workers is not used);
     # otherwise mpi4py spawns ``workers`` processes
@@ -661,11 +660,11 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
     from .simulation import spec_of
 
     if executor not in ("process", "mpi"):
-        raise SceneError("--executor", f"must be 'process' or 'mpi', not {executor!r}")
+        raise SceneError("executor", f"must be 'process' or 'mpi', not {executor!r}")
     from .simulation import mpi_rank
 
     if mpi_rank() != 0:  # plain mpiexec -n K mdgran sweep: every rank would run every case
-        raise SceneError("--executor", f"this is MPI rank {mpi_rank()}: run a sweep on MPI "
+        raise SceneError("executor", f"this is MPI rank {mpi_rank()}: run a sweep on MPI "
                          "ranks as mpiexec -n K python -m mpi4py.futures "
                          '"$(command -v mdgran)" sweep ... --executor mpi')
     stream = stream or sys.stderr
@@ -680,21 +679,21 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
             if not isinstance(before, dict):
                 raise ValueError("not a JSON object")
         except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-            raise SceneError("--out", f"{out}/sweep.json is not a sweep's record ({exc}); use "
+            raise SceneError("out_dir", f"{out}/sweep.json is not a sweep's record ({exc}); use "
                              "a new folder or remove it") from None
         if before.get("backend") != sweep["backend"] or not _extends(
                 before.get("cases"), json.loads(json.dumps(sweep["cases"]))):
-            raise SceneError("--out", f"{out} holds another sweep (or the same on backend "
+            raise SceneError("out_dir", f"{out} holds another sweep (or the same on backend "
                              f"{before.get('backend')!r}); use a new folder")
         if before.get("scene_sha256", sweep["scene_sha256"]) != sweep["scene_sha256"]:
-            raise SceneError("--out", f"the scene {sweep['scene']} changed since the sweep in "
+            raise SceneError("out_dir", f"the scene {sweep['scene']} changed since the sweep in "
                              f"{out} started (its cases would mix two scenes); restore it or "
                              "use a new folder")
     out.mkdir(parents=True, exist_ok=True)
     try:
         lock = OutputLock(out / "sweep")  # one sweep per folder at a time
     except OutputLocked as exc:
-        raise SceneError("--out", f"{out}: another sweep is running in this folder "
+        raise SceneError("out_dir", f"{out}: another sweep is running in this folder "
                          f"({str(exc).split('(', 1)[1].split(')')[0]}); wait for it to end "
                          "or use another folder") from None
     try:

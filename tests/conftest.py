@@ -98,7 +98,7 @@ def interrupt_at(monkeypatch):
 @pytest.fixture(scope="session")
 def plugin():
     """The native LAMMPS contact plugin (the install builds it; CI has g++)."""
-    from mdgran import native_plugin
+    from mdgran.backends import native_plugin
 
     try:
         return native_plugin.plugin_path()

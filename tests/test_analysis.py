@@ -204,6 +204,20 @@ def test_coincidence_on_synthetic_peaks():
     assert res["p_value"] > 0.05
 
 
+# ---- the primary pulse -------------------------------------------------------------------------
+def test_pulse_speed_and_width_of_a_gaussian_pulse():
+    """A pulse v_i(t) = exp(-(t - (i - 1)/c)**2 / (2 s**2)) running down 21 beads at c = 1.4:
+    speed c and full width at half maximum 2 sqrt(2 ln 2) s, both exactly."""
+    from types import SimpleNamespace
+
+    c, s, n = 1.4, 0.45, 21
+    t = np.arange(0.0, 25.0, 1e-3)
+    v = np.exp(-(t[:, None] - np.arange(n) / c) ** 2 / (2 * s * s))
+    tr = SimpleNamespace(v=v, time=t, n=n)
+    assert an.primary_pulse_speed(tr) == pytest.approx(c, rel=1e-3)
+    assert an.pulse_duration(tr) == pytest.approx(2 * np.sqrt(2 * np.log(2)) * s, abs=2e-3)
+
+
 # ---- a short real run --------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def micro_run():
@@ -221,6 +235,7 @@ def test_real_micro_run(micro_run):
     assert summary["c_eff_mean"] > 0 and summary["c_eff_max_segment"] > 1.0
     assert summary["c_eff_max_segment_rate"] > 0
     assert 25.0 < summary["characteristic_period"] < 35.0  # 2 * 21 / 1.40
+    assert 0.9 < an.pulse_duration(tr) < 1.3  # docs/analysis.md: "about 1.1"
     assert 0 < summary["kinetic_remaining"] < 1
     cbar = an.effective_damping(tr)
     assert np.all(np.isfinite(cbar))

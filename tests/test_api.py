@@ -1,4 +1,4 @@
-"""The Python API (issue 16): ``mdgran.run``/``read``/``scenes``/``load_scene``/``Scene``, short
+"""The Python API: ``mdgran.run``/``read``/``scenes``/``load_scene``/``Scene``, short
 reprs, errors that name Python parameters, and a light ``import mdgran``."""
 import math
 import os
@@ -183,17 +183,47 @@ def test_cli_scenes_still_works():
     assert p.returncode == 0 and "micro-star" in p.stdout
 
 
-def test_driver_errors_are_renamed_to_python_parameters():
-    from mdgran.api import _python_names
+@pytest.mark.parametrize("side", ["api", "cli"])
+def test_an_unfinished_run_is_named_by_the_parameter_or_the_flag(side, tmp_path, capsys):
+    """A checkpointed run onto an output whose .partial is there is refused before it runs:
+    the API names resume=True, the command line --resume, in the key and the text alike."""
+    out = tmp_path / "x.h5"
+    partial = tmp_path / "x.h5.partial"
+    partial.write_bytes(b"")
+    tail = f"{partial} holds an unfinished run: resume it ({{}}), or delete it to start afresh"
+    if side == "api":
+        with pytest.raises(SceneError) as info:
+            mdgran.run("micro-star", "reference", out, set=SHORT, checkpoint_every=60.0)
+        assert str(info.value) == "resume: " + tail.format("resume=True")
+    else:
+        from mdgran.cli import main
 
-    exc = _python_names(SceneError("--resume", "x.h5.partial holds an unfinished run: resume it "
-                                   "(--resume), or delete it"))
-    assert exc.key == "resume" and str(exc) == ("resume: x.h5.partial holds an unfinished run: "
-                                                "resume it (resume=True), or delete it")
-    exc = _python_names(SceneError("chain.n, run.output_interval", "1 GiB are free at / (--out)"))
-    assert exc.key == "chain.n, run.output_interval" and str(exc).endswith("at / (out)")
+        assert main(["run", "micro-star", "--out", str(out), "--set", "run.duration=0.1",
+                     "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err == "mdgran: error: --resume: " + tail.format("--resume") + "\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.h5.partial"]
+
+
+def test_the_cli_shows_a_parameter_named_in_a_message_as_its_flag():
+    from mdgran.cli import flag_message
+
+    exc = SceneError("chain.n, run.output_interval", "1 GiB are free at / (out); make chain.n "
+                     "smaller")
+    assert flag_message(exc) == ("chain.n, run.output_interval: 1 GiB are free at / (--out); "
+                                 "make chain.n smaller")
+    assert flag_message(SceneError("scene", "'x' is neither")) == "SCENE: 'x' is neither"
     same = SceneError("chain.n", "must be an integer >= 1, not 0")
-    assert _python_names(same) is same
+    assert flag_message(same) == str(same)
+
+
+def test_the_python_api_runs_without_the_command_line_module():
+    code = ("import sys, mdgran\n"
+            "try:\n    mdgran.run('micro-star', out='')\nexcept ValueError as exc:\n"
+            "    print(exc)\n"
+            "print('mdgran.cli' in sys.modules)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.stdout.splitlines() == ["out: must name an output file, e.g. run.h5", "False"]
 
 
 def test_a_run_keeps_its_own_scene():

@@ -117,3 +117,22 @@ def test_bad_option_value_is_one_line_exit_2(spec, key, tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(SceneError, match=key):
         make_backend(load_scene("micro-star"), spec)
+
+
+@pytest.mark.parametrize("backend", ["fast", pytest.param("lammps", marks=pytest.mark.lammps)])
+@pytest.mark.parametrize("dt", [0.003, 0.02])
+def test_a_step_that_does_not_divide_the_output_interval_is_refused(backend, dt):
+    """collision-pair writes every 0.01: dt = 0.003 (3.33 steps a frame) and dt = 0.02 (half a
+    step) cannot land on the output times; the fixed-step backends refuse both by run.dt."""
+    with pytest.raises(SceneError) as exc:
+        make_backend(SCENE, backend, dt=dt)
+    assert exc.value.key == "run.dt"
+    assert str(exc.value) == f"run.dt: must divide run.output_interval = 0.01 (dt = {dt})"
+
+
+def test_steps_per_frame_counts_the_steps_of_an_output_interval():
+    from mdgran.backends.base import steps_per_frame
+
+    assert steps_per_frame(0.001, 0.01) == 10
+    assert steps_per_frame(0.1 / 3, 0.1) == 3  # within round-off of the interval
+    assert steps_per_frame(0.01, 0.01) == 1

@@ -1,4 +1,4 @@
-"""Beads of real materials (issue 17): beads.E, nu, w, density_si (SI, with a [material]) and
+"""Beads of real materials: beads.E, nu, w, density_si (SI, with a [material]) and
 beads.mass set the per-bead ratios.  The expected values are computed here from SI by hand:
 the Hertz effective modulus 1/E* = (1 - nu_1^2)/E_1 + (1 - nu_2^2)/E_2, R = d/4,
 w_12 = sqrt(w_1 w_2), masses rho pi d^3 / 6, and the Maugis parameter of the pair, not from

@@ -1,4 +1,4 @@
-"""The driver takes frames by blocks (issue 18): a reporter with ``report_block`` gets each
+"""The driver takes frames by blocks: a reporter with ``report_block`` gets each
 block whole, one with ``report`` alone gets the same frames one by one, with the ledger that
 ChainModel.ledger gives each frame; the run's ledger error is the largest over every frame,
 and NaN once any frame's is NaN; the fast backend's calls on a thread of their own change

@@ -200,26 +200,3 @@ def test_checkpoint_interval_must_be_a_number_of_seconds(value, tmp_path, capsys
     with pytest.raises(SceneError, match="checkpoint_every"):
         run(load_scene("micro-star"), "reference", out=out, checkpoint_every=float(value))
 
-
-def test_resume_without_new_checkpoints_uses_the_partial_file(tmp_path, interrupt_at):
-    """``--resume --checkpoint 0`` goes on from OUT.partial (it ran the whole run again in a
-    temporary of its own and left OUT.partial behind, so that the next run on that name was
-    refused as unfinished): the file is the uninterrupted run's, bit for bit, and the partial
-    file is gone."""
-    from conftest import h5_datasets
-
-    sc = load_scene("micro-star", [("run.duration", 40.0)])
-    whole = tmp_path / "whole.h5"
-    run(sc, "fast", out=whole)
-    out = tmp_path / "r.h5"
-    with pytest.raises(KeyboardInterrupt):
-        run(sc, "fast", out=out, checkpoint_every=0.0, reporters=[interrupt_at(20.05)])
-    partial = tmp_path / "r.h5.partial"
-    assert partial.exists() and not out.exists()
-    assert main(["run", "micro-star", "--backend", "fast", "--out", str(out), "--set",
-                 "run.duration=40.0", "--resume", "--checkpoint", "0", "--quiet"]) == 0
-    assert out.exists() and not partial.exists()
-    a, b = h5_datasets(whole), h5_datasets(out)
-    assert a.keys() == b.keys()
-    for k in a:
-        assert a[k].tobytes() == b[k].tobytes(), k

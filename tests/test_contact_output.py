@@ -1,4 +1,4 @@
-"""Per-contact output (issue 16): ``output.contacts`` adds /observables/contacts/{compression,
+"""Per-contact output: ``output.contacts`` adds /observables/contacts/{compression,
 force, closed} as H5MD time series, each checked here against an independent computation from
 the stored displacements, velocities and events; a run resumed from a checkpoint writes them
 bitwise as an uninterrupted run does; the file records its MPI ranks; a resumed CLI run's

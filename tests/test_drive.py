@@ -1,4 +1,4 @@
-"""Imposed excitations (issue 17, mdgran.drive): a half-sine force pulse and a base motion
+"""Imposed excitations (mdgran.drive): a half-sine force pulse and a base motion
 under the substrate, on the reference, fast and LAMMPS backends (the Python hook and the native
 contact), against analytic motions, the momentum a pulse gives, and the energy ledger with the
 excitations' work.

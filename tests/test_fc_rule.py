@@ -1,5 +1,5 @@
-"""contact.fc_rule: the paper's COS relation (default) or the exact Maugis-Dugdale pull-off
-(issue 14).  fc is in units of eta = pi R w (docs/model.md, Contact law), the unit of Maugis's
+"""contact.fc_rule: the paper's COS relation (default) or the exact Maugis-Dugdale pull-off.
+fc is in units of eta = pi R w (docs/model.md, Contact law), the unit of Maugis's
 P = F / (pi w R) in Johnson-Greenwood notation, so the two compare without conversion."""
 import math
 

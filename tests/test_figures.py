@@ -1,4 +1,4 @@
-"""Figures: structural properties, checked on short runs and synthetic event sets (issue 16).
+"""Figures: structural properties, checked on short runs and synthetic event sets.
 
 * the smoothed re-clustering rate is a rate of cluster formation: never negative, and its
   integral is the number of newly formed clusters (property test over random event sets);

@@ -79,7 +79,7 @@ UNDAMPED_BOUND = {400.0: 1e-8, 1e5: 1.2e-5}
 def test_undamped_long_run_energy_drift():
     """No damping: the ledger error of the (non-symplectic) reference grows linearly in time
     and must stay within the measured rate (a growing drift would be a bookkeeping error).
-    MDGRAN_FULL=1 runs the 1e5 time units of the issue (about 8 minutes)."""
+    MDGRAN_FULL=1 runs 1e5 time units (about 8 minutes)."""
     duration = 1e5 if FULL else 400.0
     sc = load_scene("hard/undamped-long", [("run.duration", duration)])
     res = run(sc, "reference")

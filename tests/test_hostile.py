@@ -1,4 +1,4 @@
-"""Hostile input, unattended (issue 13): every value the backends cannot handle is refused up
+"""Hostile input, unattended: every value the backends cannot handle is refused up
 front (exit 2, one line naming the key, no traceback, no file); a run that stops progressing
 fails (exit 1, one line, the frames so far written) instead of hanging.
 

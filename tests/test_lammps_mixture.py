@@ -1,5 +1,5 @@
 """Unlike beads, strikers, substrate damping and thermal velocities on the LAMMPS backend, the
-Python hook and the native contact (issue 17), against analytic results and the reference
+Python hook and the native contact, against analytic results and the reference
 backend: second-order convergence to the reference where no contact switches, an unlike pair's
 restitution with its own loop energy, a striker's elastic collision, the same start as the other
 backends, the hook and the native contact bitwise in the mode they share, the same run on two MPI

@@ -5,14 +5,18 @@ the macro bead); the dynamics are step-quantized at snap events in LAMMPS (first
 so each dynamic check either runs two dt and asserts that the error shrinks by the expected
 factor, or holds the error to a bound derived from one step of quantization.
 """
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 
+sys.path.append(str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from mdgran import native_lammps as nl  # noqa: E402
+import native_lammps as nl  # noqa: E402  benchmarks/native_lammps.py, beside its study
 
 pytestmark = pytest.mark.lammps
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
-from mdgran import native_plugin
+from mdgran.backends import native_plugin
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 

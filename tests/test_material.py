@@ -1,4 +1,4 @@
-"""Scenes in SI that mean what they say (issue 16): a [material] derives lambda, is complete or
+"""Scenes in SI that mean what they say: a [material] derives lambda, is complete or
 an error, SI keys follow one rule, load_scene takes mappings and Scenes, and the key reference
 docs/scene_keys.md is generated from the schema."""
 import json
@@ -206,7 +206,7 @@ def test_mapping_errors_name_the_key(bad, key):
 
 
 def test_load_scene_refuses_other_types():
-    with pytest.raises(SceneError, match=r"^SCENE: must be a built-in scene name"):
+    with pytest.raises(SceneError, match=r"^scene: must be a built-in scene name"):
         load_scene(42)
 
 

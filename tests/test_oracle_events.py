@@ -41,7 +41,7 @@ def frames_with_violations(scene, backend="reference"):
 @pytest.mark.parametrize("v0", [2.0, 3.0, 0.3, 1.6, 0.8])
 @pytest.mark.parametrize("k", [5, 9, 10, 18, 20])
 def test_event_on_a_frame_time_is_found(v0, k):
-    """The issue's reproduction (v0 = 2, interval 0.01 = t_e / 25) and a grid of intervals
+    """The first failure found (v0 = 2, interval 0.01 = t_e / 25) and a grid of intervals
     t_e / k: before the fix 11 of 200 such runs on this machine lost the closing event."""
     te = 0.5 / v0
     sc = load_scene("collision-pair", [("impulse.velocity", v0), ("run.output_interval", te / k),
@@ -52,8 +52,8 @@ def test_event_on_a_frame_time_is_found(v0, k):
     assert closes and abs(closes[0].time - te) < 1e-12 * (1 + te)
 
 
-def test_issue_reproduction_collision_pair():
-    """The exact command of the issue: both events found, the beads never pass through each
+def test_collision_pair_with_its_closing_on_a_frame_time():
+    """collision-pair at v0 = 2 written every 0.01 (t_e / 25): both events found, the beads never pass through each
     other, momentum is conserved and the ledger closes at the reference's bound."""
     sc = load_scene("collision-pair", [("impulse.velocity", 2.0), ("run.output_interval", 0.01),
                                        ("run.duration", 5.0), ("run.dt", 0.001)])

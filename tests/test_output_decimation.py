@@ -1,4 +1,4 @@
-"""Output for long chains (issue 18): ``output.bead_stride`` (every k-th bead, or observables
+"""Output for long chains: ``output.bead_stride`` (every k-th bead, or observables
 and events only), ``output.compression`` (gzip, lzf) and chunks sized by bytes.
 
 Each file is checked against the full, uncompressed file of the same run (several writers fed

@@ -1,4 +1,4 @@
-"""Progress output (issue 16): every run's line ends at 100 % or at its status, a redrawn line
+"""Progress output: every run's line ends at 100 % or at its status, a redrawn line
 leaves nothing of the previous one, compare lines say their role and "run k of N", and a sweep
 names its running cases with their simulated time while they run."""
 import io

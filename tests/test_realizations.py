@@ -1,4 +1,4 @@
-"""Realizations (issue 14): a sweep runs each grid point K times with the impulse velocity
+"""Realizations: a sweep runs each grid point K times with the impulse velocity
 perturbed, v0 (1 + r eps); the report gives each statistic per realization with its mean and
 interval.  The case list, its numbering, the refusals, the interval on numbers with a known
 answer, and a tiny sweep of 3 grid points x 3 realizations end to end (fast backend)."""

@@ -1,4 +1,4 @@
-"""The reference loop's named steps (issue 15): checkpoint contents, resume, the chatter guard,
+"""The reference loop's named steps: checkpoint contents, resume, the chatter guard,
 the move of an event's target, and the integrate step's stopping rules, each on a small case."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The fast backend's pass cut into segments and run on several threads (issue 18).
+"""The fast backend's pass cut into segments and run on several threads.
 
 A pass over the chain is cut into segments of ``fast_kernel.SEGMENT`` contacts; the segments
 may run on any thread, and their results are joined in segment order.  What must hold:

@@ -25,10 +25,9 @@ from .clusters import (MERGE_WITHIN, Cluster, ClusterHistory, ReclusteringAnalys
                        analyze_reclustering, cluster_history, clusters_of, contact_states,
                        new_clusters, reclustering_events, representative_segment,
                        segment_means, segments, smoothed_cumulative, trajectory_history)
-from .coincidence import (channel_coincidence, coincidence_case, coincidence_fraction,
-                          coincidence_shift_test, coincidence_test, peak_times,
-                          pooled_channel_coincidence, pooled_coincidence_test, run_coincidence,
-                          shifted_fractions)
+from .coincidence import (coincidence_case, coincidence_fraction, coincidence_shift_test,
+                          coincidence_test, peak_times, pooled_channel_coincidence,
+                          pooled_coincidence_test, run_coincidence, shifted_fractions)
 from .effective_damping import (CHANNELS, SMOOTHING_TIME, c_eff, channel_damping,
                                 contact_damping, decay_time, dissipated_channels,
                                 dissipated_energy, effective_damping, envelope_mean,

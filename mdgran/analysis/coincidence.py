@@ -171,31 +171,6 @@ def pooled_coincidence_test(per_case, n_shifts: int = 10000, seed: int = 0) -> d
             "z": _z(obs, null), "null": null}
 
 
-def channel_coincidence(traj, *, window: float | None = None, t_range=None,
-                        prominence: float = 0.1, n_shifts: int = 10000, seed: int = 0,
-                        smoothing_time: float = SMOOTHING_TIME,
-                        merge_within: float = MERGE_WITHIN) -> dict:
-    """:func:`run_coincidence` for ``C_eff`` from each dissipation channel
-    (:func:`~.effective_damping.channel_damping`): ``{"total", "viscous", "hysteresis"}`` ->
-    :func:`coincidence_shift_test` result (with ``c_eff_peaks``, ``rate_peaks``,
-    ``t_range``), the same rate peaks and shifts for all three."""
-    from .effective_damping import channel_damping
-
-    ch = channel_damping(traj, smoothing_time=smoothing_time)
-    rc = analyze_reclustering(traj, ch["total"], smoothing_time=smoothing_time,
-                              merge_within=merge_within)
-    t0, t1 = (float(traj.time[0]), float(traj.time[-1])) if t_range is None else t_range
-    window = characteristic_period(traj) if window is None else window
-    b = peak_times(traj.time, rc.rate, prominence, (t0, t1))
-    out = {}
-    for name, cbar in ch.items():
-        a = peak_times(traj.time, cbar, prominence, (t0, t1))
-        r = coincidence_shift_test(a, b, window, t0, t1, n_shifts, seed)
-        r.update(c_eff_peaks=a, rate_peaks=b, t_range=(t0, t1))
-        out[name] = r
-    return out
-
-
 def pooled_channel_coincidence(cases, window_frac: float = 0.25, prominence: float = 0.1,
                                active: bool = True, n_shifts: int = 10000,
                                seed: int = 0) -> dict:

@@ -180,6 +180,17 @@ class Frames:
 MIN_STEPS = 10
 
 
+def steps_per_frame(dt: float, interval: float) -> int:
+    """Steps of ``dt`` in one output interval ``run.output_interval`` (same time unit), which
+    ``dt`` must divide to a relative 1e-9; else :class:`~mdgran.scene.SceneError` on ``run.dt``."""
+    from ..scene import SceneError
+
+    steps = int(round(interval / dt))
+    if steps < 1 or abs(steps * dt - interval) > 1e-9 * interval:
+        raise SceneError("run.dt", f"must divide run.output_interval = {interval} (dt = {dt})")
+    return steps
+
+
 def check_excitation_steps(model, dt: float, backend: str):
     """Refuse (:class:`~mdgran.scene.SceneError`) a force pulse shorter than
     :data:`MIN_STEPS` steps of ``dt`` (``pulse.duration``), or a base motion whose samples

@@ -52,7 +52,7 @@ from ..contact_scalar import schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
-                   check_excitation_steps)
+                   check_excitation_steps, steps_per_frame)
 
 EVENT_BUFFER = 65536
 #: bead-steps per call of the compiled loop, at least one frame (a 20-bead chain runs ~5000
@@ -146,11 +146,7 @@ class FastBackend(Backend):
         super().__init__(scene, **options)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
-        interval = float(run["output_interval"])
-        spf = int(round(interval / self.dt))
-        if spf < 1 or abs(spf * self.dt - interval) > 1e-9 * interval:
-            raise SceneError("run.dt", f"must divide run.output_interval = {interval} "
-                             f"(dt = {self.dt})")
+        spf = steps_per_frame(self.dt, float(run["output_interval"]))
         check_excitation_steps(self.model, self.dt, self.name)
         if contact_eval not in ("table", "exact"):
             raise SceneError("contact_eval", f"must be 'table' or 'exact', not {contact_eval!r}")

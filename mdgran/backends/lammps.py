@@ -1,4 +1,4 @@
-"""The LAMMPS backend: the same scenes run in LAMMPS (``lammps_inputs/chain.in``).
+"""The LAMMPS backend: the same scenes run in LAMMPS (``mdgran/lammps_inputs/chain.in``).
 
 LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the contact (law,
 hysteresis, unilateral damping) and the substrate (``chain.in``'s ``fix spring/self`` tether
@@ -42,9 +42,9 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
 * **Native contact** (``contact="native"``): the same contact as ``fix mdgran/chain`` of the
-  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.native_plugin`), in place of the hook: same law
-  (the same spline coefficients, handed over in a file), same switching rule, same operations
-  in the same order as the compiled hook, so the two agree bitwise on 1 and 2 ranks
+  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.backends.native_plugin`), in place of the hook:
+  same law (the same spline coefficients, handed over in a file), same switching rule, same
+  operations in the same order as the compiled hook, so the two agree bitwise on 1 and 2 ranks
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
@@ -81,16 +81,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import native_plugin
 from ..chain import first_contact
 from ..contact import ContactTable
 from ..lammps_env import LammpsUnavailable, check_available, new_lammps
 from ..scene import SceneError
 from ..signals import deferred
+from . import native_plugin
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
-                   check_excitation_steps)
+                   check_excitation_steps, steps_per_frame)
 
-INPUT = Path(__file__).resolve().parents[2] / "lammps_inputs" / "chain.in"
+#: the LAMMPS input the backend starts from (package data: in the checkout and in the wheel)
+INPUT = Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
 GHOST_SPACINGS = 2.5
 #: ... and with located events on several ranks: each rank steps the event windows that write
@@ -117,13 +118,6 @@ def _event_mode(events, contact):
         raise SceneError("events", "'located' needs contact='native' (the Python hook switches "
                          "contacts at step ends: events='quantized')")
     return events
-
-
-def input_file() -> Path:
-    """``lammps_inputs/chain.in`` of the checkout, or the copy installed with the package."""
-    if INPUT.exists():
-        return INPUT
-    return Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
 
 
 class _AtomViews:
@@ -203,11 +197,7 @@ class LammpsBackend(Backend):
         self.extra_commands = list(extra_commands)
         run = scene.data["run"]
         self.dt = float(options.get("dt", run["dt"]))
-        interval = float(run["output_interval"])
-        self.steps_per_frame = int(round(interval / self.dt))
-        if abs(self.steps_per_frame * self.dt - interval) > 1e-9 * interval:
-            raise SceneError("run.dt", f"must divide run.output_interval = {interval} "
-                             f"(dt = {self.dt})")
+        self.steps_per_frame = steps_per_frame(self.dt, float(run["output_interval"]))
         check_excitation_steps(self.model, self.dt, self.name)
         self.comm = comm
         m = self.model
@@ -259,7 +249,7 @@ class LammpsBackend(Backend):
                      "thermo_every": max(1, self.steps_per_frame)}
         for k, v in variables.items():
             lmp.command(f"variable {k} equal {v}")
-        lmp.file(str(input_file()))
+        lmp.file(str(INPUT))
         for cmd in self.extra_commands:  # e.g. "atom_modify sort 1 0.5" in the tests
             lmp.command(cmd)
         self.lmp = lmp

@@ -27,7 +27,7 @@
 //     integrate yes|no (quantized: the fix also moves the atoms of its group that are not walls
 //            along x with fix nve's velocity Verlet, the same operations, in place of fix nve;
 //            default no)
-//     mixture FILE (unlike beads, mdgran.native_plugin.write_mixture: by atom tag the bead's
+//     mixture FILE (unlike beads, mdgran.backends.native_plugin.write_mixture: by atom tag the bead's
 //            1/m and substrate factor g, and for the contact to its right its scales A, 1/L,
 //            L, threshold L delta_off and law class, each class with its fc and table: the
 //            contact's force A f(delta / L), energy A L V(delta / L); a bead's acceleration
@@ -37,7 +37,7 @@
 //            the contact damping; its power is added to D_viscous; default 0)
 //     pulse TAG A T t0 (four values: a half-sine force A sin(pi (t - t0) / T) on the atom with
 //            tag TAG for t0 <= t <= t0 + T; mdgran/drive.py; default: none)
-//     base FILE (a base motion u_b(t) under the substrate, mdgran.native_plugin.write_base:
+//     base FILE (a base motion u_b(t) under the substrate, mdgran.backends.native_plugin.write_base:
 //            its piecewise cubics on a uniform grid; the substrate then acts on u - u_b and
 //            w - u_b', the walls stay at 0; default: none)
 //   k1, k3, damping, sub_damping, tether, gap and lambda must be finite and >= 0: anything else
@@ -526,7 +526,7 @@ void FixMdgranChain::read_mixture(const char *file)
   mixed = 1;
 }
 
-// The base motion of mdgran.native_plugin.write_base: "MDGRAN_BASE", "step h", "rows n", then
+// The base motion of mdgran.backends.native_plugin.write_base: "MDGRAN_BASE", "step h", "rows n", then
 // n rows of 4 coefficients (highest power first), numbers as repr (exact)
 void FixMdgranChain::read_base(const char *file)
 {

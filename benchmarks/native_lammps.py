@@ -50,9 +50,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import FC_DMT, FC_JKR, ContactLaw
-from .lammps_env import new_lammps
-from .units import ALUMINA, Scales, contact_modulus
+from mdgran.backends.base import steps_per_frame
+from mdgran.contact import FC_DMT, FC_JKR, ContactLaw
+from mdgran.lammps_env import new_lammps
+from mdgran.units import ALUMINA, Scales, contact_modulus
 
 #: Bead used when a scene has no [material] table (paper's micro bead).
 DEFAULT_DIAMETER = 2.5e-6
@@ -242,9 +243,7 @@ def run_native(scene, dt: float | None = None, duration: float | None = None,
     dt = float(dt if dt is not None else d["run"]["dt"])
     duration = float(duration if duration is not None else d["run"]["duration"])
     interval = float(d["run"]["output_interval"])
-    per_frame = int(round(interval / dt))
-    if abs(per_frame * dt - interval) > 1e-9 * interval:
-        raise ValueError(f"dt = {dt} must divide run.output_interval = {interval}")
+    per_frame = steps_per_frame(dt, interval)
     frames = int(round(duration / interval))
     chain = NativeChain(scene, dt, mapping)
     # events are read off the atom force, which is the pair force alone without a tether
@@ -292,7 +291,7 @@ def probe_force(scene, deltas, mapping: NativeMapping | None = None):
     visited in the given order starting from a touching pair, so a decreasing sequence follows
     the attached branch through the tensile region until LAMMPS lets go).  Returns the
     repulsive force / eta at each point (0 where LAMMPS reports no contact)."""
-    from .scene import Scene, resolve
+    from mdgran.scene import Scene, resolve
 
     data = {k: dict(v) for k, v in scene.data.items()}
     data["chain"].update(n=2, boundary="free", initial_gap=0.0)
@@ -343,7 +342,7 @@ def pair_summary(time, x, v, ev_time, ev_kind) -> dict:
 
 def compare_pair(scene, dt: float, reference=None) -> dict:
     """Native LAMMPS against the reference backend for a two-bead collision scene."""
-    from .simulation import run
+    from mdgran.simulation import run
 
     ref = reference if reference is not None else run(scene, "reference").trajectory
     nat = run_native(scene, dt)
@@ -369,7 +368,7 @@ def compare_chain(scene, dt: float, duration: float, reference=None,
                   mapping: NativeMapping | None = None) -> dict:
     """Native LAMMPS against the reference backend: largest displacement and velocity
     differences over the frames up to ``duration`` (nondimensional)."""
-    from .simulation import run
+    from mdgran.simulation import run
 
     if reference is None:
         reference = run(scene.with_overrides([("run.duration", duration)]),

@@ -28,7 +28,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-SOURCE_DIR = Path(__file__).resolve().parent / "lammps_plugin"
+SOURCE_DIR = Path(__file__).resolve().parents[1] / "lammps_plugin"
 SOURCES = ("fix_mdgran_chain.cpp", "mdgranplugin.cpp")
 HEADERS = ("fix_mdgran_chain.h", "lammpsplugin.h")
 PLUGIN = "mdgranplugin.so"  # the name LAMMPS_PLUGIN_PATH auto-loading looks for (*plugin.so)
@@ -174,8 +174,8 @@ def write_mixture(model, folder, points=None) -> Path:
     very numbers the hook uses); each class's ``fc``.  Numbers as ``repr`` (exact)."""
     import numpy as np
 
-    from .backends.lammps_hook import NIPAR, mix_parameters
-    from .contact import ContactTable
+    from ..contact import ContactTable
+    from .lammps_hook import NIPAR, mix_parameters
 
     folder = Path(folder)
     mix = model.mixture
@@ -220,5 +220,6 @@ def lammps_plugin_path() -> str:
         return ""
 
 
-if __name__ == "__main__":  # python -m mdgran.native_plugin: build (if needed) and print the path
+# python -m mdgran.backends.native_plugin: build (if needed) and print the path
+if __name__ == "__main__":
     print(plugin_path())
