@@ -58,6 +58,7 @@ autodoc_member_order = "bysource"
 autodoc_default_options = {"members": True, "show-inheritance": False}
 napoleon_numpy_docstring = False
 python_use_unqualified_type_names = True
+add_module_names = False  # "run(scene, ...)" under its module's heading, not "mdgran.api.run"
 
 napoleon_use_ivar = True  # a class's "Attributes:" as fields, not as a second description
 # names the docstrings refer to that are described in prose (their class's or module's

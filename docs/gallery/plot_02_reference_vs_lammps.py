@@ -16,7 +16,8 @@ import mdgran
 keys = {"run.duration": 40.0}
 ref = mdgran.run("micro-star", "reference", set=keys).trajectory
 lmp = mdgran.run("micro-star", "lammps:native", set=keys).trajectory
-print(f"reference: {len(ref.ev_time)} events; LAMMPS (native contact): {len(lmp.ev_time)}")
+print(f"reference: {len(ref.ev_time)} events; "
+      f"LAMMPS (native contact): {len(lmp.ev_time)}")
 
 # %%
 # Displacements of a few beads (units of p) from both, and the largest difference over the
@@ -29,7 +30,7 @@ ax.set(ylabel="x (p)", title="reference (colour) and LAMMPS native (dashed)")
 ax.legend(fontsize=8, ncols=4)
 gap = np.max(np.abs(ref.x - lmp.x), axis=1)
 diff.semilogy(ref.time, np.maximum(gap, 1e-16), lw=0.9)
-diff.set(xlabel="t (1/q)", ylabel="max |x_ref - x_lammps| (p)")
+diff.set(xlabel="t (1/q)", ylabel="max |x_ref - x_lammps| (p)", ylim=(1e-8, 1e-2))
 fig.tight_layout()
 
 # %%
