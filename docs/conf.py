@@ -38,7 +38,6 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
-    "sphinx.ext.mathjax",
     "sphinx_gallery.gen_gallery",
 ]
 
@@ -48,7 +47,7 @@ exclude_patterns = ["_build", "examples", "gallery", "**/README.md", "auto_examp
                     "auto_examples/*.py", "auto_examples/*.zip", "auto_examples/*.md5",
                     "auto_examples/*.json"]
 
-myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
+myst_enable_extensions = ["colon_fence", "deflist"]  # formulas as text: no MathJax to fetch
 myst_heading_anchors = 3
 
 # --- API reference -----------------------------------------------------------------------------
