@@ -11,6 +11,7 @@ autosummary, napoleon); the gallery's scripts (``docs/gallery/plot_*.py``) run a
 """
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from pathlib import Path
@@ -21,6 +22,9 @@ sys.path.insert(0, str(ROOT))  # the mdgran of this checkout, installed or not
 sys.path.insert(0, str(DOCS))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# MDAnalysis (the gallery reads a run with it) warns on import that netCDF4, for AMBER files,
+# is missing; the manual writes none
+logging.getLogger("MDAnalysis.coordinates.AMBER").setLevel(logging.ERROR)
 
 import make_performance  # noqa: E402
 
