@@ -94,7 +94,7 @@ class BaseMotion:
 
     @property
     def peak_velocity(self) -> float:
-        """max |u_b'| (p q), over the samples' grid and each cubic's extremum."""
+        """max ``|u_b'|`` (p q), over the samples' grid and each cubic's extremum."""
         c = self.coef
         s = np.linspace(0.0, self.step, 9)
         v = (3.0 * c[:, :1] * s + 2.0 * c[:, 1:2]) * s + c[:, 2:3]
@@ -107,7 +107,7 @@ class BaseMotion:
         return self.step * (len(self.coef) - 1)
 
     def peak_displacement(self, t_end: float) -> float:
-        """max |u_b| (p) over ``[0, t_end]``: over each cubic on a grid and its ends, and the
+        """max ``|u_b|`` (p) over ``[0, t_end]``: over each cubic on a grid and its ends, and the
         motion after the samples up to ``t_end``."""
         c = self.coef[:-1]
         s = np.linspace(0.0, self.step, 9)

@@ -21,8 +21,8 @@ nondimensional ``beads.mass`` sets ``beads.density``.
 **A material means what it says.**  A ``[material]`` table must be complete: ``diameter`` (m),
 ``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
 ("table", default, or "text") and ``D0`` (m, default 0.165e-9, the paper's) have defaults.
-It then sets ``contact.lambda`` too (its Maugis parameter, :attr:`mdgran.units.Scales.
-maugis_lambda`), unless the scene gives ``contact.lambda`` or ``contact.fc`` itself.  Where each
+It then sets ``contact.lambda`` too (its Maugis parameter,
+:attr:`mdgran.units.Scales.maugis_lambda`), unless the scene gives ``contact.lambda`` or ``contact.fc`` itself.  Where each
 value came from is in :attr:`Scene.sources` (and ``lambda_source`` in ``mdgran info``).
 
 **Limits** (:data:`LIMITS`).  Besides being finite, a few values have ranges outside which the
@@ -81,7 +81,7 @@ class SceneError(ValueError):
         self.key = key
 
 
-#: key -> (lowest, highest) allowed (see the module doc; ``velocity`` bounds |v|)
+#: key -> (lowest, highest) allowed (see the module doc; ``velocity`` bounds ``|v|``)
 LIMITS = {
     "impulse.velocity": (-5e3, 5e3),
     "substrate.k1": (0.0, 1e6),

@@ -298,7 +298,7 @@ class Backend:
 
     def ledger_roundoff(self, scale: float, term_max: float) -> float:
         """Round-off floor, relative to ``scale``: ``LEDGER_ROUNDOFF * eps * (M + N_c) /
-        scale``.  The ledger sums terms up to ``M = term_max`` (largest |term| over the run),
+        scale``.  The ledger sums terms up to ``M = term_max`` (largest ``|term|`` over the run),
         and each of the ``N_c`` contact energies is a difference of numbers of order eta p
         (the law's unit), so the total carries a few eps of ``M + N_c`` whatever the
         integrator (hard/tiny, E_imp = 5e-13: 1.4e-2 of E_imp on every backend)."""

@@ -1,0 +1,48 @@
+"""The manual's performance page (docs/make_performance.py, run by docs/conf.py at every build)
+prints the numbers of benchmarks/results/*.json and names the file each comes from; a file
+that is not there is skipped with a line saying so, and the rest of the page is still written.
+"""
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("make_performance",
+                                                  ROOT / "docs" / "make_performance.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_numbers_come_from_the_files_and_a_missing_file_is_skipped(tmp_path):
+    mp = load_script()
+    present = [name for name in mp.SOURCES if (RESULTS / name).is_file()]
+    assert present, "no benchmark result the page reads is in benchmarks/results"
+    kept, dropped = present[0], [name for name in mp.SOURCES if name != present[0]]
+    shutil.copy(RESULTS / kept, tmp_path / kept)
+    page = mp.page(tmp_path)
+    for name in dropped:
+        assert f"`benchmarks/results/{name}` is not in this checkout" in page
+    assert f"*Source: `benchmarks/results/{kept}`" in page
+    # every section still has its heading
+    assert page.count("\n## ") == len(mp.SOURCES)
+
+
+def test_work_precision_table_holds_the_files_numbers(tmp_path):
+    mp = load_script()
+    data = {"target_ledger_error": 1e-6, "results": [{
+        "scene": "micro-star", "duration": 400.0,
+        "summary": {"fast": {"order_in": "run.dt", "order_trajectory": 2.0001,
+                             "order_ledger": 1.98932, "wall_s_at_ledger_1e-6": 0.4517,
+                             "extrapolated": False}}}]}
+    (tmp_path / "work_precision.json").write_text(json.dumps(data))
+    page = mp.page(tmp_path)
+    assert "| fast | run.dt | 2.00 | 1.99 | 0.452 | no |" in page
+    write = tmp_path / "out" / "performance.md"
+    mp.write_page(tmp_path, write)
+    assert write.read_text() == page
