@@ -156,8 +156,8 @@ def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS
     numbers: per run its :func:`pulse_profile` summary and status, ``converged``: for each
     size, the largest difference of its ``peak_v`` from the longest chain's over its own
     beads (exactly 0 once the chain is longer than the pulse's reach), and ``cross_check``:
-    the longest chain at v0 = 12 again on the backend ``cross_check`` (:func:`cross_check`;
-    None: not run)."""
+    the longest chain at v0 = 12 again on the backend ``cross_check``
+    (:func:`compare_backends`; None: not run)."""
     say = progress or (lambda m: None)
     longest = max(sizes)
     runs, done = {}, {}

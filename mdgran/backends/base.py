@@ -140,7 +140,7 @@ class Frames:
 
     def contact_series(self) -> dict:
         """``{"compression": [F, n_contacts], "force": [F, n_contacts]}``: each frame's
-        contact compressions and forces (:meth:`~mdgran.chain.ChainModel.compressions`,
+        contact compressions and forces (``ChainModel.compressions`` and
         :meth:`~mdgran.chain.ChainModel.contact_forces`: the force the backend integrates),
         computed on first use."""
         if self._contacts is None:
