@@ -367,7 +367,8 @@ b = make_backend(sc, "lammps:native")
 rows = [(bl.x[0], bl.v[0], bl.closed[0], bl.moved, bl.events) for bl in b.blocks()]
 out = dict(x=np.array([r[0] for r in rows]), v=np.array([r[1] for r in rows]),
            closed=np.array([r[2] for r in rows]), moved=np.array([r[3] for r in rows]),
-           events=np.array([(e.time, e.contact, e.kind) for r in rows for e in r[4]]))
+           events=np.array([(e.time, e.contact, e.kind) for r in rows for e in r[4]]),
+           bead_steps=b.stats["bead_steps"], steps=b.stats["steps"])
 if sys.argv[2] == "full":  # every bead gathered: what the hull's frames must be
     full = list(make_backend(sc, "lammps:native").frames())
     out.update(full_x=np.array([f.x for f in full]), full_v=np.array([f.v for f in full]),
@@ -400,3 +401,7 @@ def test_frames_gather_the_moved_hull_alone(plugin, tmp_path):
     assert lo < 199 < hi and 10 < hi - lo < 80, (lo, hi)  # around the struck bead, not the chain
     moving = np.flatnonzero(np.any(one["v"] != 0.0, axis=0))
     assert lo <= moving.min() and moving.max() < hi
+    # the run's bead-steps count the front's atoms, not the chain's
+    for res in (one, two):
+        steps = int(res["steps"])
+        assert 10 * steps < int(res["bead_steps"]) < 0.2 * 400 * steps

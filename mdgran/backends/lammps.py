@@ -364,6 +364,8 @@ class LammpsBackend(Backend):
         self.stats["events"] += n - self._events_read
         self._events_read = n
         self.stats["steps"] = int(lmp.extract_global("ntimestep"))
+        if self.event_mode == "located":  # atoms the fix stepped (its activity front)
+            self.stats["bead_steps"] = int(lmp.extract_fix("contact", 0, 1, 6))
 
     # ---- the contact hook ---------------------------------------------------------------
     def _start_hook(self, lmp):
@@ -739,6 +741,7 @@ class LammpsBackend(Backend):
 
         self._read_native_sums()
         lo, hi = self._moved_hull()
+        self.stats["front"] = [lo + 1, hi] if lo < hi else None  # 1-based beads
         m, w = self.model, 1 if self.walls else 0
         x, v = lazy_zeros((1, self.n)), lazy_zeros((1, self.n))
         closed = initial_states(self.n, self.walls, m.gap)[None]

@@ -83,7 +83,8 @@
 // fix_modify energy yes puts it into pe; a loop over every atom when asked, the atoms outside
 // the activity front with their contacts' rest energy); vector =
 // [D_hysteresis, D_viscous, number of events, external work, first and last tag of the moved
-// hull (take_in_moved_state: outside it every atom is at x0 and at rest; quantized: 1, N)]; array = events [time, contact number (1..n+1
+// hull (take_in_moved_state: outside it every atom is at x0 and at rest; quantized: 1, N),
+// atoms stepped summed over the steps (located; quantized: 0)]; array = events [time, contact number (1..n+1
 // with walls, 2..n without), kind (1 close, 0 open), step]; per-atom vector = state of the
 // contact to the atom's right (1 closed).  With several MPI ranks each contact is owned by
 // the rank owning its left atom (events and dissipation there); the rank owning the right atom
@@ -240,7 +241,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   extscalar = 1;
   energy_global_flag = 1;
   vector_flag = 1;
-  size_vector = 6;
+  size_vector = 7;
   extvector = -1;    // the sums are extensive, the moved hull's tags are not
   array_flag = 1;
   size_array_rows = 0;
@@ -272,6 +273,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   moved_hi = 0;
   moved_all[0] = 1.0;
   moved_all[1] = (double) ntags;
+  bead_steps = bead_steps_all = 0.0;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
   if (!base_file.empty()) read_base(base_file.c_str());
   driven = pulse_tag != 0 || based;
@@ -296,7 +298,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   ncompute = 0;
   energy_at = -1;
   energy_cache = 0.0;
-  ext_flags = {1, 1, 1, 1, 0, 0};    // last: an error above must not leave it to Fix to free
+  ext_flags = {1, 1, 1, 1, 0, 0, 1};    // last: an error above must not leave it to Fix to free
   extlist = ext_flags.data();        // ours (the destructor sets it back to null)
 }
 
@@ -878,6 +880,9 @@ void FixMdgranChain::sync()
   MPI_Allreduce(hull, both, 2, MPI_DOUBLE, MPI_MIN, world);
   moved_all[0] = both[0];
   moved_all[1] = -both[1];
+  double stepped = bead_steps, stepped_all = 0.0;
+  MPI_Allreduce(&stepped, &stepped_all, 1, MPI_DOUBLE, MPI_SUM, world);
+  bead_steps_all = stepped_all;
   double part[3] = {d_hyst, d_visc, work}, sum[3];
   MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
   d_hyst_all += sum[0];
@@ -1527,6 +1532,14 @@ static void take_in(tagint &lo, tagint &hi, tagint a, tagint b)
   }
 }
 
+// The atoms this step drifts, evaluates and kicks: the owned moving atoms of the front (every
+// one, front_all) -- the vector's 7th element sums them over the steps and ranks (bead-steps)
+void FixMdgranChain::count_bead_steps()
+{
+  const std::vector<int> &r = front_all ? runs : front_runs;
+  for (size_t k = 0; k + 1 < r.size(); k += 2) bead_steps += r[k + 1] - r[k];
+}
+
 // front_all, or the owned moving atoms of the front as runs of local indices in increasing
 // order (the order of runs, which the sums over atoms follow)
 void FixMdgranChain::select_front()
@@ -1749,6 +1762,7 @@ void FixMdgranChain::located_step()
   else owned_hull(xs, vs, 1, hull_lo, hull_hi);    // the start of the run's first step
   select_front();    // again: the ghosts may widen it, re-neighbouring renumbers the atoms
   select_front_contacts();
+  count_bead_steps();
   set_drive_time(t0 + dt);
   const double p1 = located_pass(dt);
   double viscous = 0.0, power = 0.0, work_w = 0.0;    // the windows' changes (this rank's)
@@ -2455,6 +2469,7 @@ double FixMdgranChain::compute_vector(int n)
   if (n == 1) return d_visc_all;
   if (n == 2) return (double) ev_all.size();
   if (n == 3) return work_all;
+  if (n == 6) return comm->nprocs > 1 ? bead_steps_all : bead_steps;
   if (!located) return n == 4 ? 1.0 : (double) ntags;    // every atom is stepped
   if (comm->nprocs > 1) return moved_all[n - 4];
   return n == 4 ? (double) moved_lo : (double) moved_hi;

@@ -189,9 +189,11 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   tagint hull_lo, hull_hi;                  // first step: owned atoms not at rest at its start
   tagint moved_lo, moved_hi;                // every atom this rank changed or found moved
   double moved_all[2];                      // their hull over the ranks at the last sync
+  double bead_steps, bead_steps_all;        // atoms stepped (this rank; all, at the last sync)
   std::vector<int> ext_flags;               // extlist: which vector values are extensive
   void take_in_moved_state();
   int front_holds_still() const;
+  void count_bead_steps();
   inline int rest_at(int i, const double *x, const double *v, int stride) const;
   void owned_hull(const double *x, const double *v, int stride, tagint &lo, tagint &hi) const;
   void select_front();
