@@ -266,60 +266,80 @@ def make_report(out, small: bool = False, workers: int | None = None,
     numbers["coincidence_windows"] = coincidence_windows(micro)
     numbers["smoothing"] = smoothing_sensitivity(micro)
     if cases:
-        say("pooled coincidence test over the sweep")
-        numbers["coincidence_pooled"] = [
-            pooled_coincidence(cases, w, n_shifts=200 if small else 1000, active=act)
-            for act in (False, True) for w in (0.25, 1.0)]
-        numbers["fig6"] = pf.fig6(cases, figs / "fig6.png")
-        numbers["figB"] = pf.fig_b(cases, [figs / f"figB{k}.png" for k in (1, 2, 3)])
-        late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
-                 "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in cases]
-        numbers["fig7"] = pf.fig7(late, figs / "fig7.png", "after the impact transient "
-                                  "(segments starting at t >= T_c/2)")
-        numbers["fig7_literal"] = pf.fig7(cases, figs / "fig7_literal.png",
-                                          "literal rule (any segment but the last)")
-        say("null models of Fig. 7 and of the coincidence test")
-        numbers["nulls"] = null_models(cases, small)
-        spec = json.loads((sdir / "sweep.json").read_text())
-        numbers["sweep"] = {"cases": len(cases), "dir": str(sdir),
-                            "max_ledger_error": max(c["ledger_error"] for c in cases),
-                            "realizations": int(spec.get("realizations", 1))}
-        groups = realization_groups(cases)
-        if len(groups) > 1:
-            say(f"the study's statistics on each of {len(groups)} realizations")
-            rz = realization_statistics(cases, small, pooled_statistics(numbers))
-        else:
-            rz = {"K": 1, "realizations": list(groups), "interval": None, "statistics": {}}
-        rz["perturbation"] = spec.get("perturbation")
-        if rz["K"] > 1:
-            rz["shuffles"] = (f"{REALIZATION_SHIFTS[bool(small)]} circular shifts for the "
-                              "coincidence test, {} and {} shuffles for the null models".format(
-                                  *REALIZATION_SHUFFLES[bool(small)]))
-        numbers["realizations"] = rz
+        numbers.update(sweep_numbers(cases, sdir, figs, small, say, numbers))
     numbers["beyond"] = {}
     if "long-chain" in beyond:
         numbers["long_chain"] = _long_chain(figs / "beyond-long-chain.png", small, say)
     for name in (b for b in beyond if b not in BEYOND_STUDIES):
-        bdir = out / "beyond" / name
-        run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
-                  progress=progress, backend=_folder_backend(bdir, backend))
-        bfailed = check_sweep_files(bdir, "DIR")
-        bc = sweep_cases(bdir, "DIR")
-        key, label, log = BEYOND[name]
-        late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
-                 "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in bc]
-        numbers["beyond"][name] = {
-            "cases": len(bc), "n": bc[0]["scene"].data["chain"]["n"] if bc else None,
-            "fig7": pf.fig7(late, figs / f"beyond-{name}.png", "segments starting at t >= T_c/2",
-                            color_key=key, color_label=label, title=name, log_color=log),
-            "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
-            "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
-            "not_complete": not_complete(bc) + bfailed,
-            "backend": _folder_backend(bdir, backend)}
+        numbers["beyond"][name] = beyond_sweep(name, out, figs, workers, small, progress,
+                                               backend)
     write_atomic(out / "report.json", json.dumps(numbers, indent=1, default=_json) + "\n")
     write_atomic(out / "report.md", markdown(numbers, cases, small))
     say(f"report: {out / 'report.md'}")
     return numbers
+
+
+def sweep_numbers(cases, sdir, figs, small, say, numbers) -> dict:
+    """The study's numbers over the sweep's ``cases`` (folder ``sdir``): the pooled
+    coincidence test, Figs. 6, B and 7 (after the impact transient and by the literal rule),
+    their null models, the sweep's summary and the statistics per realization (``numbers``:
+    the report's so far, for the pooled statistics)."""
+    out = {}
+    say("pooled coincidence test over the sweep")
+    out["coincidence_pooled"] = [
+        pooled_coincidence(cases, w, n_shifts=200 if small else 1000, active=act)
+        for act in (False, True) for w in (0.25, 1.0)]
+    out["fig6"] = pf.fig6(cases, figs / "fig6.png")
+    out["figB"] = pf.fig_b(cases, [figs / f"figB{k}.png" for k in (1, 2, 3)])
+    late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
+             "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in cases]
+    out["fig7"] = pf.fig7(late, figs / "fig7.png", "after the impact transient "
+                          "(segments starting at t >= T_c/2)")
+    out["fig7_literal"] = pf.fig7(cases, figs / "fig7_literal.png",
+                                  "literal rule (any segment but the last)")
+    say("null models of Fig. 7 and of the coincidence test")
+    out["nulls"] = null_models(cases, small)
+    spec = json.loads((sdir / "sweep.json").read_text())
+    out["sweep"] = {"cases": len(cases), "dir": str(sdir),
+                    "max_ledger_error": max(c["ledger_error"] for c in cases),
+                    "realizations": int(spec.get("realizations", 1))}
+    groups = realization_groups(cases)
+    if len(groups) > 1:
+        say(f"the study's statistics on each of {len(groups)} realizations")
+        rz = realization_statistics(cases, small, pooled_statistics({**numbers, **out}))
+    else:
+        rz = {"K": 1, "realizations": list(groups), "interval": None, "statistics": {}}
+    rz["perturbation"] = spec.get("perturbation")
+    if rz["K"] > 1:
+        rz["shuffles"] = (f"{REALIZATION_SHIFTS[bool(small)]} circular shifts for the "
+                          "coincidence test, {} and {} shuffles for the null models".format(
+                              *REALIZATION_SHUFFLES[bool(small)]))
+    out["realizations"] = rz
+    return out
+
+
+def beyond_sweep(name, out, figs, workers, small, progress, backend) -> dict:
+    """The sweep ``name`` of :data:`BEYOND` run into ``out/beyond/NAME`` (what it lacks) and
+    analysed as the study's: Fig. 7 coloured by its parameter, the pooled coincidence test,
+    the cases that are not complete."""
+    from .sweep import run_sweep
+
+    bdir = out / "beyond" / name
+    run_sweep(name, bdir, workers=workers or (os.cpu_count() or 1), small=small,
+              progress=progress, backend=_folder_backend(bdir, backend))
+    bfailed = check_sweep_files(bdir, "DIR")
+    bc = sweep_cases(bdir, "DIR")
+    key, label, log = BEYOND[name]
+    late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
+             "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in bc]
+    return {
+        "cases": len(bc), "n": bc[0]["scene"].data["chain"]["n"] if bc else None,
+        "fig7": pf.fig7(late, figs / f"beyond-{name}.png", "segments starting at t >= T_c/2",
+                        color_key=key, color_label=label, title=name, log_color=log),
+        "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),
+        "max_ledger_error": max((c["ledger_error"] for c in bc), default=None),
+        "not_complete": not_complete(bc) + bfailed,
+        "backend": _folder_backend(bdir, backend)}
 
 
 def _long_chain(figure, small: bool, say) -> dict:
