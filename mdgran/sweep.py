@@ -458,6 +458,73 @@ def _death(exitcode) -> str:
 WORKER_DEATHS = 2
 
 
+class _Pool:
+    """The sweep's worker processes, one case at a time each, in ``slots`` slots (each slot
+    pinned to its share of ``cores``); a worker that dies is replaced in its slot."""
+
+    def __init__(self, ctx, fn, slots: int, cores, out: Path):
+        self.ctx, self.fn, self.slots, self.cores, self.out = ctx, fn, slots, cores, out
+        self.workers: list = []
+
+    def start(self):
+        while len(self.workers) < self.slots:
+            self.workers.append(self._new(len(self.workers)))
+
+    def _new(self, slot: int) -> "_Worker":
+        return _Worker(self.ctx, self.fn, worker_cores(slot, self.slots, self.cores))
+
+    def busy(self) -> list:
+        return [w for w in self.workers if w.case is not None]
+
+    def assign(self, queue, args_of):
+        """Hand the next cases of ``queue`` to the idle workers (one that died idle, killed
+        from outside, is replaced first; one that dies just now is replaced next round)."""
+        for i, w in enumerate(self.workers):
+            if w.case is not None or not queue:
+                continue
+            if not w.proc.is_alive():
+                w.stop(kill=True)
+                self.workers[i] = w = self._new(i)
+            try:
+                w.conn.send(args_of(queue[0]))
+            except OSError:
+                continue
+            w.case = queue.popleft()
+
+    def finished(self, ready) -> list:
+        """``(slot, case, message)`` of each busy worker that ``ready`` (of
+        :func:`multiprocessing.connection.wait`) shows done: its message, None if it died."""
+        out = []
+        for i, w in enumerate(self.workers):
+            if w.case is None or (w.conn not in ready and w.proc.sentinel not in ready):
+                continue
+            msg = None
+            try:
+                if w.conn.poll():
+                    msg = w.conn.recv()
+            except (EOFError, OSError):
+                msg = None
+            out.append((i, w.case, msg))
+        return out
+
+    def replace_dead(self, slot: int, case) -> str:
+        """Replace the worker of ``slot``, which died running ``case``: its temporaries and
+        the case's progress file go; returns how it died."""
+        w = self.workers[slot]
+        w.proc.join()
+        why = _death(w.proc.exitcode)
+        w.conn.close()
+        for stale in (self.out / "cases").glob(f"*.tmp-{w.proc.pid}"):
+            stale.unlink(missing_ok=True)
+        (self.out / "cases" / f"{case['index']:04d}.progress").unlink(missing_ok=True)
+        self.workers[slot] = self._new(slot)
+        return why
+
+    def stop(self, kill: bool):
+        for w in self.workers:
+            w.stop(kill=kill)
+
+
 def _run_processes(todo, args_of, fn, workers: int, out: Path, done, tick=None,
                    tick_every: float = 1.0):
     """Run ``todo`` on ``workers`` processes; ``done(case, summary)`` for each finished one.
@@ -470,60 +537,29 @@ def _run_processes(todo, args_of, fn, workers: int, out: Path, done, tick=None,
     import multiprocessing
     from multiprocessing.connection import wait
 
-    ctx = multiprocessing.get_context()
-    cores, slots = usable_cores(), min(workers, len(todo))
-
-    def share(slot):  # worker slot's cores (a replaced worker takes its slot's)
-        return worker_cores(slot, slots, cores)
-
+    pool = _Pool(multiprocessing.get_context(), fn, min(workers, len(todo)), usable_cores(),
+                 out)
     queue = collections.deque(todo)
     deaths: dict = {}
-    pool: list = []
     try:
-        for _ in range(slots):
-            pool.append(_Worker(ctx, fn, share(len(pool))))
-        while queue or any(w.case is not None for w in pool):
-            for i, w in enumerate(pool):
-                if w.case is not None or not queue:
-                    continue
-                if not w.proc.is_alive():  # died idle (killed from outside): replace it
-                    w.stop(kill=True)
-                    pool[i] = w = _Worker(ctx, fn, share(i))
-                try:
-                    w.conn.send(args_of(queue[0]))
-                except OSError:  # died just now: the next round replaces it
-                    continue
-                w.case = queue.popleft()
-            busy = [w for w in pool if w.case is not None]
+        pool.start()
+        while queue or pool.busy():
+            pool.assign(queue, args_of)
+            busy = pool.busy()
             if not busy:  # every idle worker died before taking a case: replace them
                 _time.sleep(0.05)
                 continue
             ready = wait([w.conn for w in busy] + [w.proc.sentinel for w in busy],
                          timeout=tick_every if tick is not None else None)
             if tick is not None:
-                tick([w.case["index"] for w in pool if w.case is not None])
-            for i, w in enumerate(pool):
-                if w.case is None or (w.conn not in ready and w.proc.sentinel not in ready):
-                    continue
-                case, msg = w.case, None
-                try:
-                    if w.conn.poll():
-                        msg = w.conn.recv()
-                except (EOFError, OSError):
-                    msg = None
+                tick([w.case["index"] for w in pool.busy()])
+            for slot, case, msg in pool.finished(ready):
                 if msg is not None:
-                    w.case = None
+                    pool.workers[slot].case = None
                     kind, value = msg
                     done(case, value if kind == "ok" else _failed_case(case, out, value))
                     continue
-                # the worker died running the case: replace it, run the case again (first)
-                w.proc.join()
-                why = _death(w.proc.exitcode)
-                w.conn.close()
-                for stale in (out / "cases").glob(f"*.tmp-{w.proc.pid}"):
-                    stale.unlink(missing_ok=True)
-                (out / "cases" / f"{case['index']:04d}.progress").unlink(missing_ok=True)
-                pool[i] = _Worker(ctx, fn, share(i))
+                why = pool.replace_dead(slot, case)  # and run the case again, first
                 deaths[case["index"]] = deaths.get(case["index"], 0) + 1
                 if deaths[case["index"]] >= WORKER_DEATHS:
                     done(case, _failed_case(case, out, f"its worker process died "
@@ -531,11 +567,9 @@ def _run_processes(todo, args_of, fn, workers: int, out: Path, done, tick=None,
                 else:
                     queue.appendleft(case)
     except BaseException:
-        for w in pool:
-            w.stop(kill=True)
+        pool.stop(kill=True)
         raise
-    for w in pool:
-        w.stop(kill=False)
+    pool.stop(kill=False)
 
 
 def _run_futures(pool, todo, args_of, fn, out: Path, done, tick=None, tick_every: float = 1.0):
