@@ -8,7 +8,7 @@ Example::
     print(res)                        # RunResult(scene='micro-star', backend='reference', ...)
     rec = mdgran.read("ms.h5")        # the same Run record, read back from the H5MD file
 
-Everything is nondimensional (docs/model.md, Units): length ``p``, force ``eta = pi R w``,
+Everything is nondimensional (docs/physics.md section 1): length ``p``, force ``eta = pi R w``,
 time ``1/q``, bead mass 1, energy ``eta p``.  Errors name this module's parameters (``scene``,
 ``backend``, ``out``, ``set``, ...), not the command line's flags: bad input raises
 :class:`~mdgran.scene.SceneError` (a ``ValueError``) or ``TypeError`` before anything runs.

@@ -363,7 +363,7 @@ class ChainModel:
 
     def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
                external_work=0.0, t=0.0) -> dict:
-        """The energy ledger of docs/model.md, Energy ledger, for one state at time t, with the
+        """The energy ledger of docs/physics.md section 4 for one state at time t, with the
         excitations' work ``external_work`` (:mod:`mdgran.drive`): ``total = kinetic +
         contact + substrate + dissipated - external_work``; row 0 of :meth:`ledger_block`
         (floats)."""

@@ -1,4 +1,4 @@
-"""Contact laws between two beads, nondimensional (units of docs/model.md).
+"""Contact laws between two beads, nondimensional (units of docs/physics.md section 1).
 
 Every quantity here is in the units of the inter-bead interaction: force in ``eta = pi R w``,
 compression ``delta`` in ``p = (pi^2 R w^2 / K^2)^(1/3)``, energy in ``eta * p``.
@@ -28,7 +28,7 @@ The contact energy on the attached branch, ``V(delta) = integral_0^delta f d del
 closed-form polynomial ``P(t) - P(t0)`` with ``P`` the antiderivative of ``f(t) delta'(t)`` and
 ``t0 = (4 sigma)^(1/3)`` the point ``delta = 0``.
 
-Hysteresis (docs/model.md, Contact law): an open contact carries no force and closes when ``delta``
+Hysteresis (docs/physics.md section 2): an open contact carries no force and closes when ``delta``
 reaches 0 from below (``delta_on = 0``); a closed contact follows the attached branch and
 opens when ``delta`` falls to ``delta_off``: the minimum ``delta_min`` of ``delta(a)`` (the
 paper's displacement rule, default) or the tensile force maximum ``f = fc`` (``snap_off =
@@ -135,7 +135,8 @@ def maugis_dugdale_pulloff(lam: float) -> float:
     192, 326): contact radius ``A = a (K / (pi w R^2))^(1/3)``, load ``P = F / (pi w R)``,
     ``m = c / a`` the ratio of the cohesive zone's outer radius to the contact radius, and the
     Maugis parameter ``lambda = 2 sigma_0 (R / (pi w K^2))^(1/3)`` (with the Dugdale stress
-    ``sigma_0 = w / (0.97 D0)`` this is ``2.06 / D0 (R w^2 / (pi K^2))^(1/3)``, docs/model.md),
+    ``sigma_0 = w / (0.97 D0)`` this is ``2.06 / D0 (R w^2 / (pi K^2))^(1/3)``,
+    docs/physics.md section 1),
     ``K = (4/3) E*``::
 
         (lambda A^2 / 2) [sqrt(m^2-1) + (m^2-2) atan sqrt(m^2-1)]
@@ -334,7 +335,8 @@ class ContactLaw:
         return self._antiderivative(self.t_of_delta(d)) - self._antiderivative(t0)
 
     def describe(self) -> dict:
-        """The law's characteristic values (docs/model.md's check table), nondimensional."""
+        """The law's characteristic values (the check table of docs/physics.md section 2),
+        nondimensional."""
         return {
             "law": self.kind,
             "fc": self.fc if self.kind == "schwarz" else None,

@@ -1,6 +1,6 @@
 """Chains of unlike beads: per-bead masses and a contact law of its own for every contact.
 
-Units stay those of the **reference bead** (docs/model.md, Units): a pair of two reference
+Units stay those of the **reference bead** (docs/physics.md section 1): a pair of two reference
 beads (diameter ``d0``, contact modulus ``K0``, work of adhesion ``w0``, density ``rho0``) has
 ``R0 = d0 / 4``, force unit ``eta0 = pi R0 w0``, length unit ``p0 = (pi^2 R0 w0^2 / K0^2)^(1/3)``,
 mass unit ``m0``.  Bead ``i`` is given by its ratios to the reference bead: diameter ``s_i``,

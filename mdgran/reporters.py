@@ -56,7 +56,7 @@ COMPRESSION = {
     "lzf": {"compression": "lzf", "shuffle": True},
 }
 #: per-contact time series under /observables/contacts: name -> dtype, unit (nondimensional,
-#: docs/model.md, Units), description.  ``closed`` is always stored; the others with
+#: docs/physics.md section 1), description.  ``closed`` is always stored; the others with
 #: ``output.contacts`` (:data:`CONTACT_DETAIL`)
 CONTACT_SERIES = {
     "compression": ("f8", "p", "contact compression delta = x_left - x_right - initial_gap"),
@@ -362,8 +362,8 @@ class H5MDWriter:
         par.attrs["backend"] = backend_name
         par.attrs["mdgran_version"] = vers["mdgran"]
         par.attrs["versions"] = json.dumps(vers)
-        par.attrs["units"] = ("nondimensional (docs/model.md): length p, force eta = pi R w,"
-                              " time 1/q, energy eta p, bead mass 1")
+        par.attrs["units"] = ("nondimensional (docs/physics.md section 1): length p, force"
+                              " eta = pi R w, time 1/q, energy eta p, bead mass 1")
         par.attrs["status"] = "running"
         sc = self.scene.scales
         if sc is not None:

@@ -4,7 +4,7 @@
 ``sweep``, the paper's figures): it is filled by :class:`~mdgran.reporters.MemoryReporter`
 during a run, or read back from an H5MD file by :func:`read_h5` (``mdgran.read``), and it holds
 everything those stages need, so none of them rebuilds the scene or the contact states.
-Everything is nondimensional (docs/model.md, Units): length ``p``, time ``1/q``, velocity
+Everything is nondimensional (docs/physics.md section 1): length ``p``, time ``1/q``, velocity
 ``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass 1).
 """
 from __future__ import annotations
@@ -70,7 +70,7 @@ def scene_from_toml(text: str, name: str = "scene"):
 
 
 class Run:
-    """One run's record (nondimensional units, docs/model.md, Units).
+    """One run's record (nondimensional units, docs/physics.md section 1).
 
     Attributes:
         time: ``[F]`` frame times (units of ``1/q``), the first 0, one per

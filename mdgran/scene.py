@@ -10,7 +10,7 @@ before anything runs.  ``docs/scenes.md`` explains the rules with a worked SI ex
 
 **SI and nondimensional keys.**  Keys of ``[material]`` are SI (the beads' material).  In the
 other sections a key ending in ``_si`` is SI and needs a ``[material]``; every other key is
-nondimensional (units of docs/model.md).  A value may be given one way only: ``k1`` or
+nondimensional (units of docs/physics.md section 1).  A value may be given one way only: ``k1`` or
 ``k1_si``, not both.  The SI keys are ``substrate.k1_si`` (N/m), ``substrate.k3_si``
 (N/m^3), ``contact.damping_si`` (Ns/m), ``impulse.velocity_si`` (m/s), ``run.duration_si`` (s),
 and per bead (a number or a list of chain.n) ``beads.E`` (Pa), ``beads.nu``, ``beads.w``
@@ -1082,7 +1082,8 @@ def key_reference() -> str:
         "rules (SI and nondimensional keys, what a `[material]` derives) are in",
         "[scenes.md](scenes.md). `[material]` keys, keys ending in `_si` and `beads.E`,",
         "`beads.nu`, `beads.w` (named as the `[material]` keys they give per bead) are SI; every",
-        "other key is nondimensional, in the units of docs/model.md: force",
+        "other key is nondimensional, in the units of",
+        "[the physics, section 1](physics.md#1-scales-and-units): force",
         "`eta = pi R w`, length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1;",
         "\"-\" is a pure number. Values must also be finite; \"range\" is what the checks in",
         "`mdgran/scene.py` allow (an SI key's converted value must fit its plain key's range).",

@@ -52,7 +52,7 @@ class BackendUnavailable(RuntimeError):
 
 @dataclass(repr=False)
 class RunResult:
-    """What :func:`run` (and ``mdgran.run``) returns; all values nondimensional (docs/model.md,
+    """What :func:`run` (and ``mdgran.run``) returns; all values nondimensional (docs/physics.md
     section 1: time ``1/q``, length ``p``, energy ``eta p``).
 
     Attributes:

@@ -1,4 +1,5 @@
-"""From a material in SI units to the scales of the nondimensional model (section 1 of the paper's model).
+"""From a material in SI units to the scales of the nondimensional model (docs/physics.md
+section 1).
 
 Units are converted once, here; everything else in mdgran is nondimensional.
 

@@ -173,7 +173,8 @@ def test_modes_of_free_cluster():
 
 def test_equilibrium_modes_use_law_stiffness():
     law = ContactLaw("schwarz", fc_from_lambda(0.64))
-    assert law.stiffness_eq == pytest.approx(1.81129, abs=1e-4)  # docs/model.md's check table
+    # the check values of docs/physics.md section 2
+    assert law.stiffness_eq == pytest.approx(1.81129, abs=1e-4)
     om, _ = an.equilibrium_modes(law, 4, 0.0121, left_wall=True)
     ref, _ = an.modes(np.full(4, law.stiffness_eq), 0.0121, left_wall=True)
     assert np.allclose(om, ref)

@@ -18,9 +18,9 @@ from mdgran.scene import SceneError, load_scene, tomllib
 D = 2.5e-6  # m, micro-star's beads
 ALUMINA = {"diameter": D, "E": 338e9, "nu": 0.21, "w": 0.146, "density": 3900.0}
 STEEL_LIKE = (200e9, 0.3)  # Pa, -: a second material, given as numbers
-#: K = c E* of two beads, c per material.modulus (docs/model.md, "Modulus convention": table
-#: K = E / (2 (1 - nu^2)), text K = (2/3) E / (1 - nu^2); E* of two equal beads is
-#: E / (2 (1 - nu^2)))
+#: K = c E* of two beads, c per material.modulus (docs/physics.md section 1, "The modulus
+#: convention": table K = E / (2 (1 - nu^2)), text K = (2/3) E / (1 - nu^2); E* of two equal
+#: beads is E / (2 (1 - nu^2)))
 C = {"table": 1.0, "text": 4.0 / 3.0}
 
 

@@ -9,7 +9,7 @@ from mdgran.simulation import make_backend, run
 
 
 def test_paper_wire_cubic_coefficient():
-    # docs/model.md, Equations of motion: K3_hat of the micro wire of Table II is about 1.9e-8
+    # docs/physics.md section 3: K3_hat of the micro wire of Table II is about 1.9e-8
     assert paper_wire_k3(load_scene("micro-star")) == pytest.approx(1.9e-8, rel=0.01)
 
 

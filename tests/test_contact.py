@@ -1,11 +1,13 @@
-"""Contact laws against the independent check table of docs/model.md and analytic identities."""
+"""Contact laws against the independent check table of docs/physics.md section 2 and analytic
+identities."""
 
 import numpy as np
 import pytest
 
 from mdgran.contact import ContactLaw, fc_from_lambda, lambda_from_fc, table_error
 
-# docs/model.md, Contact law: lambda, fc, delta_min, f_on, f_off, W, delta_eq, dF/ddelta at eq
+# docs/physics.md section 2, check values: lambda, fc, delta_min, f_on, f_off, W, delta_eq,
+# dF/ddelta at eq
 CHECK = [
     (0.0, -2.00000, 0.0, -2.00000, -2.00000, 0.0, 1.58740, 1.88988),
     (0.30, -1.95193, -0.19067, -1.93591, -1.88784, 0.37039, 1.53888, 1.86295),

@@ -1,5 +1,5 @@
 """contact.fc_rule: the paper's COS relation (default) or the exact Maugis-Dugdale pull-off.
-fc is in units of eta = pi R w (docs/model.md, Contact law), the unit of Maugis's
+fc is in units of eta = pi R w (docs/physics.md section 2), the unit of Maugis's
 P = F / (pi w R) in Johnson-Greenwood notation, so the two compare without conversion."""
 import math
 
@@ -13,7 +13,7 @@ from mdgran.contact import (FC_RULES, ContactLaw, fc_from_lambda, lambda_from_fc
 from mdgran.scene import SceneError, load_scene
 
 MD = "maugis-dugdale"
-# docs/model.md: Maugis's equations solved exactly vs the COS relation
+# docs/physics.md section 2: Maugis's equations solved exactly vs the COS relation
 CHECK = [(0.3, -1.816, -1.95193), (0.64, -1.672, -1.85182), (1.5, -1.556, -1.65773)]
 
 

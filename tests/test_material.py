@@ -28,7 +28,7 @@ def silica_from_docs() -> str:
 
 
 def lambda_by_hand(d, E, nu, w, D0=0.165e-9):
-    """docs/model.md, Units: lambda = 2.06 / D0 (R w^2 / (pi K^2))^(1/3), R = d/4,
+    """docs/physics.md section 1: lambda = 2.06 / D0 (R w^2 / (pi K^2))^(1/3), R = d/4,
     K = E / (2 (1 - nu^2))."""
     K = E / (2.0 * (1.0 - nu * nu))
     return 2.06 / D0 * ((d / 4.0) * w * w / (math.pi * K * K)) ** (1.0 / 3.0)

@@ -15,7 +15,7 @@
 5. saves ``OUT_DIR/small_study.png`` (kinetic energy and ``C_eff / C_+`` against time) and
    ``OUT_DIR/summary.json`` (the table's numbers).
 
-Everything is nondimensional (docs/model.md, Units): time ``1/q``, length ``p``, energy
+Everything is nondimensional (docs/physics.md section 1): time ``1/q``, length ``p``, energy
 ``eta p``.  About 10 s on one core at the default duration (the fast backend's first run
 compiles its kernel for a few seconds and caches it).  Exit status 0 if the backends agree and
 both runs are complete, 1 otherwise.

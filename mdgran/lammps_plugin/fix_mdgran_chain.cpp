@@ -54,7 +54,7 @@
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
 // u = x - x0 the displacement from the atom's initial x (walls: u = 0, v = 0).
 //
-// Law (docs/model.md, Contact law; mdgran/contact.py), with t = sqrt(a) on the attached branch
+// Law (docs/physics.md section 2; mdgran/contact.py), with t = sqrt(a) on the attached branch
 // t >= t_min = sigma^(1/3), s = (fc + 2)/3, sigma = sqrt(s):
 //     delta(t) = t^4 - 4 sigma t,   f(t) = fc + (t^3 - 3 sigma)^2        (Schwarz; JKR fc = -1.5,
 //     V(delta) = P(t) - P(t0),      P' = f delta',  t0 = (4 sigma)^(1/3)  DMT fc = -2)
