@@ -317,14 +317,15 @@ class ChainModel:
         return p
 
     # ---- energy ledger ---------------------------------------------------------------------
-    def closed_contact_energies(self, delta, closed) -> np.ndarray:
-        """``np.where(closed, contact_law_energy(delta), 0.0)`` (any shape), the law evaluated
-        once for every contact at ``delta = 0`` (a long chain's contacts at rest: the Newton
+    def closed_contact_energies(self, delta, closed, k=None) -> np.ndarray:
+        """``np.where(closed, contact_law_energy(delta, k), 0.0)`` (any shape; ``k``: the
+        contacts of the last axis, a slice or indices, default all), the law evaluated once
+        for every contact at ``delta = 0`` (a long chain's contacts at rest: the Newton
         iterations of the Schwarz energy cost ~0.25 us a contact) and at the others alone:
         bitwise the same, the law being elementwise."""
         delta = np.asarray(delta, dtype=float)
         if self.mixture is not None:
-            return np.where(closed, self.contact_law_energy(delta), 0.0)
+            return np.where(closed, self.contact_law_energy(delta, k), 0.0)
         out = np.zeros(delta.shape)
         moved = closed & (delta != 0.0)
         out[moved] = self.law_energy(delta[moved])
@@ -399,7 +400,7 @@ class ChainModel:
         kinetic = 0.5 * sum_blocks([dots(mass_v[:, s], v[:, s]) for s in beads], beads, self.n,
                                    F)
         delta = self._block_differences(x, contacts)
-        energies = [np.sum(self.closed_contact_energies(d, closed[:, s]), axis=1)
+        energies = [np.sum(self.closed_contact_energies(d, closed[:, s], s), axis=1)
                     for d, s in zip(delta, contacts)]
         contact = sum_blocks(energies, contacts, self.n_contacts, F, self._rest_contact_sums(F))
         y = x

@@ -74,3 +74,26 @@ def test_contacts_at_rest_take_the_law_once(name, overrides):
     closed = rng.random(delta.shape) < 0.8
     every = np.where(closed, model.contact_law_energy(delta), 0.0)
     assert every.tobytes() == model.closed_contact_energies(delta, closed).tobytes()
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("mixed/dimer", []),
+    ("micro-star", [("chain.boundary", "free"), ("beads.density", [1.0, 0.3] * 2498)])])
+def test_a_mixture_longer_than_a_ledger_block(name, overrides):
+    """Unlike beads on more contacts than one ledger block (4096): each block's contacts take
+    their own pair laws (the whole chain's scales were broadcast against one block and the
+    ledger raised).  The block ledger is each state's, and its contact energy is the sum of
+    the pair laws' energies taken contact by contact."""
+    from mdgran.chain import LEDGER_BLOCK
+
+    model = model_from_scene(load_scene(name, [("chain.n", LEDGER_BLOCK + 900), *overrides]))
+    assert model.n_contacts > LEDGER_BLOCK
+    x, v, closed, dv, dh = random_block(model, 3, np.random.default_rng(7))
+    block = model.ledger_block(x, v, closed, dv, dh)
+    for k in range(len(x)):
+        one = model.ledger(x[k], v[k], closed[k], float(dv[k]), float(dh[k]))
+        assert all(block[t][k] == one[t] for t in one)
+        delta = model.compressions(x[k])
+        each = sum(float(model.contact_law_energy(delta[j:j + 1], [j])[0])
+                   for j in np.flatnonzero(closed[k]))
+        assert block["contact_energy"][k] == pytest.approx(each, rel=1e-12)
