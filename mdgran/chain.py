@@ -38,7 +38,7 @@ from functools import cached_property
 import numpy as np
 
 from .contact import ContactLaw
-from .contact_scalar import lifted, schwarz_constants, schwarz_energy_libm
+from .contact_scalar import numpy_law
 from .drive import Drive
 from .mixture import Mixture
 
@@ -335,21 +335,16 @@ class ChainModel:
         return out
 
     @cached_property
-    def _schwarz(self):
-        """The Schwarz law's constants (:func:`~mdgran.contact_scalar.schwarz_constants`),
-        computed once: the ledger evaluates the energy at every frame, and the law would
-        recompute them at each call."""
-        return schwarz_constants(self.law)
+    def _law_constants(self):
+        """The law's constants (:attr:`ContactLaw.constants`), computed once: the ledger
+        evaluates the energy at every frame, and the law would recompute them at each call."""
+        return tuple(self.law.constants)
 
     def law_energy(self, delta):
         """``law.energy(delta)`` with the law's constants computed once: the same scalar law
-        (:func:`~mdgran.contact_scalar.schwarz_energy_libm`) lifted over ``delta``."""
-        law = self.law
-        if law.kind != "schwarz":
-            return law.energy(delta)
-        k = self._schwarz
-        return lifted(schwarz_energy_libm)(np.asarray(delta, dtype=float), k.fc, k.sigma,
-                                           k.t_min, k.delta_min, k.energy_zero)
+        (:func:`~mdgran.contact_scalar.numpy_law`) lifted over ``delta``."""
+        return numpy_law(self.law.kind, "energy")(np.asarray(delta, dtype=float),
+                                                  *self._law_constants)
 
     def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
                external_work=0.0, t=0.0) -> dict:

@@ -49,7 +49,8 @@ from functools import lru_cache
 import numpy as np
 
 from . import contact_scalar as cs
-from .contact_scalar import COS_ALPHA, COS_LAMBDA, FC_DMT, FC_JKR, lifted
+from .contact_scalar import (COS_ALPHA, COS_LAMBDA, FC_DMT, FC_JKR, SchwarzConstants, lifted,
+                             numpy_law, schwarz_constants)
 
 #: Contact-law names a scene may use.
 LAWS = ("schwarz", "jkr", "dmt", "hertz")
@@ -286,31 +287,28 @@ class ContactLaw:
         d = np.asarray(delta, dtype=float)
         return lifted(cs.branch_t)(d, self.sigma, self.t_min, self.delta_min)
 
+    @property
+    def constants(self) -> SchwarzConstants:
+        """The constants the scalar laws read (:func:`~mdgran.contact_scalar.schwarz_constants`;
+        zeros for Hertz)."""
+        return schwarz_constants(self)
+
     def force(self, delta):
         """Force on the attached branch (positive = repulsive), for a closed contact."""
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            return lifted(cs.hertz_force_numpy)(d)
-        return lifted(cs.schwarz_force_libm)(d, self.fc, self.sigma, self.t_min, self.delta_min)
+        return numpy_law(self.kind, "force")(np.asarray(delta, dtype=float), *self.constants)
 
     def stiffness(self, delta):
         """``df/d delta`` on the attached branch (infinite at ``delta_min``)."""
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            return lifted(cs.hertz_stiffness_numpy)(d)
         with np.errstate(divide="ignore"):
-            return lifted(cs.schwarz_stiffness_libm)(d, self.sigma, self.t_min, self.delta_min)
+            return numpy_law(self.kind, "stiffness")(np.asarray(delta, dtype=float),
+                                                     *self.constants)
 
     def energy(self, delta):
         """Energy of a closed contact, ``V(delta) = integral_0^delta f`` on the attached branch.
 
         Zero at ``delta = 0``, so closing at ``delta = 0`` leaves the energy continuous.
         """
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            return lifted(cs.hertz_energy_numpy)(d)
-        return lifted(cs.schwarz_energy_libm)(d, self.fc, self.sigma, self.t_min,
-                                              self.delta_min, self.energy_zero)
+        return numpy_law(self.kind, "energy")(np.asarray(delta, dtype=float), *self.constants)
 
     def describe(self) -> dict:
         """The law's characteristic values (physics.md check table), nondimensional."""

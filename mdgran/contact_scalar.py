@@ -134,8 +134,10 @@ def schwarz_antiderivative_products(t, fc, sigma):
 
 
 # ---- one law's values at one compression, constants as scalars (liftable to ufuncs) ----------
+# Every law of the NumPy side takes (delta, fc, sigma, t_min, delta_min, energy_zero): the
+# compression and the fields of SchwarzConstants (a law reads those it needs).
 @njit(cache=True)
-def schwarz_force_libm(delta, fc, sigma, t_min, delta_min):
+def schwarz_force_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
     """Attached-branch force ``f(delta) = fc + (t^3 - 3 sigma)^2``, ``t^3`` by ``pow``."""
     t = branch_t(delta, sigma, t_min, delta_min)
     return schwarz_force_of_cube(math.pow(t, 3.0), fc, sigma)
@@ -149,7 +151,7 @@ def schwarz_energy_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
 
 
 @njit(cache=True, error_model="numpy")
-def schwarz_stiffness_libm(delta, sigma, t_min, delta_min):
+def schwarz_stiffness_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
     """``df/d delta = 6 t^2 (t^3 - 3 sigma) / (4 (t^3 - sigma))`` on the attached branch
     (units eta / p; infinite at ``delta_min``), ``t^3`` by ``pow``."""
     t = branch_t(delta, sigma, t_min, delta_min)
@@ -196,21 +198,31 @@ def hertz_energy(delta):
 
 
 @njit(cache=True)
-def hertz_force_numpy(delta):
-    """:func:`hertz_force` with numpy's positive part (:func:`positive_part_numpy`)."""
+def hertz_force_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """:func:`hertz_force` with numpy's positive part (:func:`positive_part_numpy`); the
+    Schwarz constants are not read."""
     return hertz_force_of(positive_part_numpy(delta))
 
 
 @njit(cache=True)
-def hertz_energy_numpy(delta):
+def hertz_energy_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
     """:func:`hertz_energy` with numpy's positive part (:func:`positive_part_numpy`)."""
     return hertz_energy_of(positive_part_numpy(delta))
 
 
 @njit(cache=True)
-def hertz_stiffness_numpy(delta):
+def hertz_stiffness_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
     """Hertz stiffness ``1.5 delta_+^(1/2)`` with numpy's positive part."""
     return hertz_stiffness_of(positive_part_numpy(delta))
+
+
+#: The NumPy side's laws by kind: ``(force, energy, stiffness)``, each a scalar function of
+#: ``(delta, *SchwarzConstants)`` that :func:`numpy_law` lifts to a ufunc.
+NUMPY_LAWS = {
+    "schwarz": (schwarz_force_libm, schwarz_energy_libm, schwarz_stiffness_libm),
+    "hertz": (hertz_force_numpy, hertz_energy_numpy, hertz_stiffness_numpy),
+}
+QUANTITIES = ("force", "energy", "stiffness")
 
 
 # ---- the fast kernel's forms: constants in a SchwarzConstants record, powers as products ----
@@ -321,6 +333,12 @@ def lifted(fn):
         sig = "float64(" + ", ".join(["float64"] * py.__code__.co_argcount) + ")"
         _UFUNCS[name] = vectorize([sig], cache=True)(py).ufunc
     return _UFUNCS[name]
+
+
+def numpy_law(kind: str, quantity: str):
+    """The ufunc ``(delta, fc, sigma, t_min, delta_min, energy_zero) -> value`` of ``quantity``
+    (``"force"``, ``"energy"`` or ``"stiffness"``) of a law of ``kind`` (:data:`NUMPY_LAWS`)."""
+    return lifted(NUMPY_LAWS[kind][QUANTITIES.index(quantity)])
 
 
 # ---- the C++ fix's constants ----------------------------------------------------------------

@@ -40,8 +40,7 @@ from functools import cached_property
 import numpy as np
 
 from .contact import ContactLaw, fc_from_lambda
-from . import contact_scalar as cs
-from .contact_scalar import lifted, schwarz_constants
+from .contact_scalar import numpy_law, schwarz_constants
 
 
 def pair_ratios(s, k, a, walls: bool, adhesion=None):
@@ -138,33 +137,28 @@ class Mixture:
         """Per-contact ``(fc, sigma, t_min, delta_min, P(t0))`` of all contacts or of ``k``."""
         return self._constants if k is None else tuple(c[k] for c in self._constants)
 
+    def _law(self, quantity, delta, k):
+        """``(A, L, value)``: the scales of all contacts (or of ``k``) and their own law's
+        ``quantity`` at ``delta / L`` (:func:`~mdgran.contact_scalar.numpy_law`)."""
+        A, L = self._scales(k)
+        u = np.asarray(delta, dtype=float) / L
+        with np.errstate(divide="ignore"):
+            return A, L, numpy_law(self.law.kind, quantity)(u, *self._own(k))
+
     def force(self, delta, k=None):
         """Force of each closed contact at compression ``delta`` [..., m] (or of contacts
         ``k`` at ``delta`` [len(k)]), units eta0: ``A f(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            return A * lifted(cs.hertz_force_numpy)(u)
-        fc, sg, tm, dm, _ = self._own(k)
-        return A * lifted(cs.schwarz_force_libm)(u, fc, sg, tm, dm)
+        A, _, f = self._law("force", delta, k)
+        return A * f
 
     def energy(self, delta, k=None):
         """Energy of each closed contact at ``delta``, units eta0 p0: ``A L V(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            return (A * L) * lifted(cs.hertz_energy_numpy)(u)
-        return (A * L) * lifted(cs.schwarz_energy_libm)(u, *self._own(k))
+        A, L, e = self._law("energy", delta, k)
+        return (A * L) * e
 
     def stiffness(self, delta, k=None):
         """``dF/d delta`` of each closed contact, units eta0 / p0: ``(A / L) f'(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            return (A / L) * lifted(cs.hertz_stiffness_numpy)(u)
-        _, sg, tm, dm, _ = self._own(k)
-        with np.errstate(divide="ignore"):
-            own = lifted(cs.schwarz_stiffness_libm)(u, sg, tm, dm)
+        A, L, own = self._law("stiffness", delta, k)
         return (A / L) * own
 
     def _scales(self, k):

@@ -214,7 +214,8 @@ def exact_force(par, ipar, d):
     (:mod:`mdgran.contact_scalar`'s scalar laws)."""
     if ipar[I_HERTZ]:
         return hertz_force(d)
-    return schwarz_force_libm(d, par[P_FC], par[P_SIGMA], par[P_TM], par[P_DELTA_MIN])
+    return schwarz_force_libm(d, par[P_FC], par[P_SIGMA], par[P_TM], par[P_DELTA_MIN],
+                              par[P_P0])
 
 
 @njit(cache=True)
