@@ -38,7 +38,7 @@ from functools import cached_property
 import numpy as np
 
 from .contact import ContactLaw
-from .contact_scalar import branch_t_ufunc, pow_ufunc
+from .contact_scalar import numpy_law
 from .drive import Drive
 from .mixture import Mixture
 
@@ -336,31 +336,16 @@ class ChainModel:
         return out
 
     @cached_property
-    def _schwarz_energy_constants(self) -> tuple:
-        """Constants of :meth:`ContactLaw.energy` for a Schwarz law, computed once (the ledger
-        evaluates the energy at every frame; the law recomputes them at each call):
-        ``(sigma, t_min, delta_min)`` of the branch, the antiderivative's coefficients
-        ``(4 sigma, fc + 15 sigma^2, 4 sigma (fc + 9 sigma^2))`` and its value at ``t0``."""
-        law = self.law
-        sg, fc = law.sigma, law.fc
-        t0 = (4.0 * sg) ** (1.0 / 3.0)
-        coef = (4.0 * sg, fc + 15.0 * sg * sg, 4.0 * sg * (fc + 9.0 * sg * sg))
-        return (sg, law.t_min, law.delta_min), coef, law._antiderivative(t0)
+    def _law_constants(self):
+        """The law's constants (:attr:`ContactLaw.constants`), computed once: the ledger
+        evaluates the energy at every frame, and the law would recompute them at each call."""
+        return tuple(self.law.constants)
 
     def law_energy(self, delta):
-        """``law.energy(delta)``: :meth:`ContactLaw.energy` with its constants computed once,
-        the same operations in the same order (so bitwise equal)::
-
-            V = A(t(delta)) - A(t0),  A(t) = 0.4 t^10 - 4 sigma t^7 + (fc + 15 sigma^2) t^4
-                                             - 4 sigma (fc + 9 sigma^2) t
-        """
-        law = self.law
-        if law.kind != "schwarz":
-            return law.energy(delta)
-        branch, (c7, c4, c1), a0 = self._schwarz_energy_constants
-        t = branch_t_ufunc()(np.asarray(delta, dtype=float), *branch)
-        pw = pow_ufunc()  # the C library's pow, as ContactLaw.energy (bitwise)
-        return (0.4 * pw(t, 10.0) - c7 * pw(t, 7.0) + c4 * pw(t, 4.0) - c1 * t) - a0
+        """``law.energy(delta)`` with the law's constants computed once: the same scalar law
+        (:func:`~mdgran.contact_scalar.numpy_law`) lifted over ``delta``."""
+        return numpy_law(self.law.kind, "energy")(np.asarray(delta, dtype=float),
+                                                  *self._law_constants)
 
     def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
                external_work=0.0, t=0.0) -> dict:

@@ -15,14 +15,11 @@ where ``delta`` is monotone, so ``f`` is a single-valued function of ``delta`` t
 inverted to machine precision by Newton's method on ``phi(w) = sqrt(delta - delta_min)`` with
 ``w = t - t_min`` (``phi`` is increasing and convex, with ``phi'(0) > 0``, so Newton started
 above the root converges monotonically and quadratically even at the snap-off point, where
-``t(delta)`` has a square-root singularity).  That inversion is
-:func:`mdgran.contact_scalar.branch_t`, the fast kernel's own, applied elementwise.  The
-polynomials in ``t`` (force, energy, stiffness) are evaluated here with the C library's ``pow``
-(:func:`mdgran.contact_scalar.pow_ufunc`: numpy's ``**`` would take SIMD code on AVX-512 machines
-and differ there in the last bit) and in the kernel (:mod:`mdgran.contact_scalar`) with products
-(``t*t*t``): the two differ in the last bit for about a quarter of all ``t``, and both the
-reference backend and the force table that the fast backend interpolates are kept bit for bit as
-they were, so those lines exist twice.
+``t(delta)`` has a square-root singularity).  The arithmetic of each law (branch inversion,
+force, energy, stiffness, the table's spline) is written once, as scalar functions in
+:mod:`mdgran.contact_scalar`; the methods here lift them over arrays as numpy ufuncs
+(:func:`mdgran.contact_scalar.lifted`), with the C library's ``pow`` for the powers of ``t``
+(numpy's ``**`` would take SIMD code on AVX-512 machines and differ there in the last bit).
 
 The contact energy on the attached branch, ``V(delta) = integral_0^delta f d delta'``, is the
 closed-form polynomial ``P(t) - P(t0)`` with ``P`` the antiderivative of ``f(t) delta'(t)`` and
@@ -51,7 +48,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .contact_scalar import branch_t_ufunc, pow_ufunc
+from . import contact_scalar as cs
+from .contact_scalar import (COS_ALPHA, COS_LAMBDA, FC_DMT, FC_JKR, SchwarzConstants, lifted,
+                             numpy_law, schwarz_constants)
 
 #: Contact-law names a scene may use.
 LAWS = ("schwarz", "jkr", "dmt", "hertz")
@@ -61,9 +60,6 @@ SNAP_OFF_RULES = ("displacement", "force")
 #: Carpick-Ogletree-Salmeron fit the paper uses (default), ``"maugis-dugdale"`` Maugis's
 #: equations solved exactly (:func:`maugis_dugdale_pulloff`).
 FC_RULES = ("cos", "maugis-dugdale")
-
-FC_DMT = -2.0
-FC_JKR = -1.5
 
 
 def fc_from_lambda(lam: float, rule: str = "cos") -> float:
@@ -80,7 +76,7 @@ def fc_from_lambda(lam: float, rule: str = "cos") -> float:
     :func:`maugis_dugdale_pulloff` (-2 at ``lambda = 0``, -> -1.5 as ``lambda -> inf``).
     """
     if rule == "cos":
-        alpha = (1.0 - math.exp(-lam / 0.924)) / 1.02
+        alpha = (1.0 - math.exp(-lam / COS_LAMBDA)) / COS_ALPHA
         return -6.0 / (alpha * alpha + 3.0)
     if rule == "maugis-dugdale":
         return maugis_dugdale_pulloff(lam)
@@ -107,8 +103,8 @@ def lambda_from_fc(fc: float, rule: str = "cos") -> float:
     if rule != "cos":
         raise ValueError(f"fc rule must be one of {FC_RULES}, not {rule!r}")
     alpha = math.sqrt(max(-3.0 - 6.0 / fc, 0.0))
-    arg = 1.0 - 1.02 * alpha
-    return math.inf if arg <= 0.0 else -0.924 * math.log(arg)
+    arg = 1.0 - COS_ALPHA * alpha
+    return math.inf if arg <= 0.0 else -COS_LAMBDA * math.log(arg)
 
 
 def _md_curve(s, lam: float):
@@ -224,26 +220,14 @@ class ContactLaw:
         return self.sigma ** (1.0 / 3.0)
 
     @property
-    def hysteretic(self) -> bool:
-        """True when the law has a force jump on closing (Schwarz; DMT too, with zero loop)."""
-        return self.kind == "schwarz"
-
-    @property
     def delta_min(self) -> float:
         """Smallest compression on the attached branch, ``t_min^4 - 4 sigma t_min``."""
-        tm = self.t_min
-        return tm**4 - 4.0 * self.sigma * tm
+        return cs.branch_delta(self.t_min, self.sigma)
 
     @property
     def delta_force_max(self) -> float:
         """Compression at the tensile force maximum ``f = fc`` (``t^3 = 3 sigma``)."""
-        t = (3.0 * self.sigma) ** (1.0 / 3.0)
-        return t**4 - 4.0 * self.sigma * t
-
-    @property
-    def delta_on(self) -> float:
-        """An open contact closes when ``delta`` rises to this value."""
-        return 0.0
+        return cs.branch_delta((3.0 * self.sigma) ** (1.0 / 3.0), self.sigma)
 
     @property
     def delta_off(self) -> float:
@@ -274,8 +258,8 @@ class ContactLaw:
         """Natural equilibrium (``f = 0``) on the attached branch."""
         if self.kind == "hertz":
             return 0.0
-        t = (3.0 * self.sigma + math.sqrt(-self.fc)) ** (1.0 / 3.0)
-        return t**4 - 4.0 * self.sigma * t
+        return cs.branch_delta((3.0 * self.sigma + math.sqrt(-self.fc)) ** (1.0 / 3.0),
+                               self.sigma)
 
     @property
     def stiffness_eq(self) -> float:
@@ -284,55 +268,48 @@ class ContactLaw:
             return 0.0
         return float(self.stiffness(self.delta_eq))
 
-    # ---- the law as functions of delta ----------------------------------------------------
+    @property
+    def energy_zero(self) -> float:
+        """``P(t0)``, the antiderivative at ``delta = 0`` (``t0 = (4 sigma)^(1/3)``), so that
+        ``V(0) = 0`` (0 for Hertz)."""
+        if self.kind == "hertz":
+            return 0.0
+        return cs.schwarz_antiderivative_libm((4.0 * self.sigma) ** (1.0 / 3.0), self.fc,
+                                              self.sigma)
+
+    # ---- the law as functions of delta: contact_scalar's functions lifted over arrays ------
     def t_of_delta(self, delta):
         """Branch parameter ``t >= t_min`` with ``t^4 - 4 sigma t = delta`` (Schwarz only).
 
         Below ``delta_min`` the value is clamped to ``t_min`` (the force then stays at ``f_off``,
         a continuous extension used only inside an integration step that overshoots an event).
-        Newton's method on ``sqrt(delta - delta_min)``: the scalar
-        :func:`mdgran.contact_scalar.branch_t`, the fast kernel's own, applied elementwise.
+        :func:`mdgran.contact_scalar.branch_t` applied elementwise.
         """
         d = np.asarray(delta, dtype=float)
-        return branch_t_ufunc()(d, self.sigma, self.t_min, self.delta_min)
+        return lifted(cs.branch_t)(d, self.sigma, self.t_min, self.delta_min)
+
+    @property
+    def constants(self) -> SchwarzConstants:
+        """The constants the scalar laws read (:func:`~mdgran.contact_scalar.schwarz_constants`;
+        zeros for Hertz)."""
+        return schwarz_constants(self)
 
     def force(self, delta):
         """Force on the attached branch (positive = repulsive), for a closed contact."""
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            dp = np.maximum(d, 0.0)
-            return dp * np.sqrt(dp)
-        t = self.t_of_delta(d)
-        u = pow_ufunc()(t, 3.0) - 3.0 * self.sigma
-        return self.fc + u * u
+        return numpy_law(self.kind, "force")(np.asarray(delta, dtype=float), *self.constants)
 
     def stiffness(self, delta):
         """``df/d delta`` on the attached branch (infinite at ``delta_min``)."""
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            return 1.5 * np.sqrt(np.maximum(d, 0.0))
-        t = self.t_of_delta(d)
         with np.errstate(divide="ignore"):
-            t3 = pow_ufunc()(t, 3.0)
-            return 6.0 * t * t * (t3 - 3.0 * self.sigma) / (4.0 * (t3 - self.sigma))
-
-    def _antiderivative(self, t):
-        sg, fc = self.sigma, self.fc
-        pw = pow_ufunc()
-        return (0.4 * pw(t, 10.0) - 4.0 * sg * pw(t, 7.0) + (fc + 15.0 * sg * sg) * pw(t, 4.0)
-                - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
+            return numpy_law(self.kind, "stiffness")(np.asarray(delta, dtype=float),
+                                                     *self.constants)
 
     def energy(self, delta):
         """Energy of a closed contact, ``V(delta) = integral_0^delta f`` on the attached branch.
 
         Zero at ``delta = 0``, so closing at ``delta = 0`` leaves the energy continuous.
         """
-        d = np.asarray(delta, dtype=float)
-        if self.kind == "hertz":
-            dp = np.maximum(d, 0.0)
-            return 0.4 * dp * dp * np.sqrt(dp)
-        t0 = (4.0 * self.sigma) ** (1.0 / 3.0)
-        return self._antiderivative(self.t_of_delta(d)) - self._antiderivative(t0)
+        return numpy_law(self.kind, "energy")(np.asarray(delta, dtype=float), *self.constants)
 
     def describe(self) -> dict:
         """The law's characteristic values (the check table of docs/physics.md section 2),
@@ -365,7 +342,7 @@ class ContactLaw:
             t_lo = float(self.t_of_delta(self.delta_off))
             t_hi = float(self.t_of_delta(delta_max))
             t = np.linspace(t_lo, t_hi, n)
-            d = t**4 - 4.0 * self.sigma * t
+            d = lifted(cs.branch_delta)(t, self.sigma)
             d[0], d[-1] = self.delta_off, delta_max
         return d, self.force(d), self.energy(d)
 
@@ -442,23 +419,23 @@ class ContactTable:
         self.f_coef = np.ascontiguousarray(CubicSpline(self.w, self.f).c.T)
         self.e_coef = np.ascontiguousarray(CubicSpline(self.w, self.e).c.T)
 
-    def _locate(self, delta):
-        w = np.sqrt(np.maximum(np.asarray(delta, dtype=float) - self.base, 0.0))
-        s = np.minimum(w * self._scale, self.n - 1 - 1e-9)
-        i = s.astype(np.int64)
-        return i, (s - i) * self._h
+    @property
+    def top(self) -> float:
+        """The largest table coordinate ``w / h``: just below the last node."""
+        return self.n - 1 - 1e-9
 
-    @staticmethod
-    def _horner(c, i, x):
-        return ((c[i, 0] * x + c[i, 1]) * x + c[i, 2]) * x + c[i, 3]
+    def _spline(self, coef, delta):
+        d = np.asarray(delta, dtype=float)
+        out = cs.spline_values(coef, self.base, self._scale, self.top, self._h, d.ravel())
+        return out.reshape(d.shape)[()]
 
     def force(self, delta):
-        i, x = self._locate(delta)
-        return self._horner(self.f_coef, i, x)
+        """The force spline at ``delta`` (:func:`mdgran.contact_scalar.spline_values`)."""
+        return self._spline(self.f_coef, delta)
 
     def energy(self, delta):
-        i, x = self._locate(delta)
-        return self._horner(self.e_coef, i, x)
+        """The energy spline at ``delta``."""
+        return self._spline(self.e_coef, delta)
 
     def error(self) -> dict:
         """Largest interpolation errors against the exact law, on 17 points per interval."""

@@ -1,19 +1,31 @@
-"""The contact laws as compiled scalar functions (numba), one contact at a time.
+"""The contact laws, one contact at a time: the one source of each law's arithmetic.
 
-The one implementation of the law's scalar arithmetic: the fast backend's kernel
-(:mod:`mdgran.backends.fast_kernel`) calls these functions, and :mod:`mdgran.contact` inverts
-the Schwarz law with :func:`branch_t` (through :func:`branch_t_ufunc`).  Units and equations
-are those of :mod:`mdgran.contact` (force in ``eta``, compression in ``p``, energy in
-``eta p``); with ``t = sqrt(a_hat)`` on the attached branch ``t >= t_min = sigma^(1/3)``::
+Each law is a small pure scalar function (numba ``njit``) with its formula in its docstring;
+every user lifts these over contacts with a thin wrapper: :class:`mdgran.contact.ContactLaw`,
+:mod:`mdgran.chain` and :mod:`mdgran.mixture` through numpy ufuncs (:func:`lifted`), the fast
+kernel (:mod:`mdgran.backends.fast_kernel`) and the LAMMPS hook
+(:mod:`mdgran.backends.lammps_hook`) by calling them in their compiled loops.  The C++ fix
+(``mdgran/lammps_plugin/fix_mdgran_chain.cpp``) is the independent implementation: it keeps
+its own code and takes its numerical constants from ``law_constants.h``, which
+:func:`cxx_header` writes from the constants here.
+
+Units are those of :mod:`mdgran.contact` (force in ``eta``, compression in ``p``, energy in
+``eta p``).  With ``t = sqrt(a_hat)`` on the attached branch ``t >= t_min = sigma^(1/3)``::
 
     delta(t) = t^4 - 4 sigma t,     f(t) = fc + (t^3 - 3 sigma)^2,
     V(delta) = P(t(delta)) - P(t0),  P(t) = 0.4 t^10 - 4 sigma t^7 + (fc + 15 sigma^2) t^4
                                              - 4 sigma (fc + 9 sigma^2) t,   t0^3 = 4 sigma
     Hertz:   f = delta_+^(3/2),     V = 0.4 delta_+^(5/2)
 
-Powers of ``t`` are products here (``t3 = t*t*t``); :class:`mdgran.contact.ContactLaw`
-evaluates the same polynomials with numpy's ``**``, which rounds differently in the last bit,
-so those two stay separate (see :mod:`mdgran.contact`).
+**Two roundings of the powers of t.**  The NumPy side (``ContactLaw``, the chain's ledger,
+mixtures), the LAMMPS hook and the C++ fix take the powers with the C library's ``pow``
+(``*_libm`` functions; numpy's own ``**`` on arrays takes SIMD code on AVX-512 machines and
+differs there in the last bit); the fast kernel takes them as products (``t3 = t*t*t``).  The
+two differ in the last bit for about a quarter of all ``t``, and each backend's results are
+kept bit for bit, so the polynomial ``P`` is written here in both orders, side by side; the
+force shares :func:`schwarz_force_of_cube`.  Likewise the positive part ``delta_+`` of Hertz:
+``max(delta, 0)`` keeps the sign of ``-0.0`` (the kernels', C++'s ``std::max``), numpy's
+``np.maximum`` returns ``+0.0`` (:func:`positive_part_numpy`).
 """
 from __future__ import annotations
 
@@ -23,13 +35,26 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+# ---- numerical constants (the C++ fix reads them from law_constants.h, cxx_header) ---------
 #: Newton steps of the branch inversion (quadratic convergence reaches round-off after 5).
 NEWTON_STEPS = 7
-# 5-point Gauss-Legendre nodes and weights on [-1, 1] (exact for degree 9)
-GL_X = np.array([-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
-                 0.9061798459386640])
-GL_W = np.array([0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
-                 0.4786286704993665, 0.2369268850561891])
+#: 5-point Gauss-Legendre nodes and weights on [-1, 1] (exact for degree 9)
+GL_NODES = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
+            0.9061798459386640)
+GL_WEIGHTS = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889, 0.4786286704993665,
+              0.2369268850561891)
+GL_X = np.array(GL_NODES)
+GL_W = np.array(GL_WEIGHTS)
+#: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
+#: displacement rule; the located-event passes of the fast kernel and of the C++ fix).
+SING_BAND = 0.1
+#: Pull-off forces fc (units eta) of the DMT and JKR limits: a Schwarz law has fc in between.
+FC_DMT = -2.0
+FC_JKR = -1.5
+#: The Carpick-Ogletree-Salmeron relation ``lambda = -COS_LAMBDA ln(1 - COS_ALPHA alpha)``
+#: (:func:`mdgran.contact.fc_from_lambda`).
+COS_LAMBDA = 0.924
+COS_ALPHA = 1.02
 
 
 class SchwarzConstants(NamedTuple):
@@ -49,9 +74,15 @@ def schwarz_constants(law) -> SchwarzConstants:
     """The constants of a :class:`mdgran.contact.ContactLaw` (``NO_SCHWARZ`` for Hertz)."""
     if law.kind != "schwarz":
         return NO_SCHWARZ
-    t0 = (4.0 * law.sigma) ** (1.0 / 3.0)
     return SchwarzConstants(float(law.fc), float(law.sigma), float(law.t_min),
-                            float(law.delta_min), float(law._antiderivative(t0)))
+                            float(law.delta_min), float(law.energy_zero))
+
+
+# ---- the Schwarz branch ----------------------------------------------------------------------
+@njit(cache=True)
+def branch_delta(t, sigma):
+    """Compression at branch parameter ``t``: ``delta = t^4 - 4 sigma t`` (units p)."""
+    return math.pow(t, 4.0) - 4.0 * sigma * t
 
 
 @njit(cache=True)
@@ -78,22 +109,137 @@ def branch_t(delta, sigma, t_min, delta_min):
 
 
 @njit(cache=True)
+def schwarz_force_of_cube(t3, fc, sigma):
+    """Schwarz force from ``t3 = t^3``: ``f = fc + (t^3 - 3 sigma)^2`` (units eta)."""
+    u = t3 - 3.0 * sigma
+    return fc + u * u
+
+
+@njit(cache=True)
+def schwarz_antiderivative_libm(t, fc, sigma):
+    """``P(t) = 0.4 t^10 - 4 sigma t^7 + (fc + 15 sigma^2) t^4 - 4 sigma (fc + 9 sigma^2) t``
+    (``P' = f delta'``; units eta p), the powers by the C library's ``pow``."""
+    return (0.4 * math.pow(t, 10.0) - 4.0 * sigma * math.pow(t, 7.0)
+            + (fc + 15.0 * sigma * sigma) * math.pow(t, 4.0)
+            - 4.0 * sigma * (fc + 9.0 * sigma * sigma) * t)
+
+
+@njit(cache=True)
+def schwarz_antiderivative_products(t, fc, sigma):
+    """``P(t)`` of :func:`schwarz_antiderivative_libm`, the powers as products of ``t^3`` and
+    ``t`` (the fast kernel's rounding)."""
+    t3 = t * t * t
+    return (0.4 * t3 * t3 * t3 * t - 4.0 * sigma * t3 * t3 * t
+            + (fc + 15.0 * sigma * sigma) * t3 * t - 4.0 * sigma * (fc + 9.0 * sigma * sigma) * t)
+
+
+# ---- one law's values at one compression, constants as scalars (liftable to ufuncs) ----------
+# Every law of the NumPy side takes (delta, fc, sigma, t_min, delta_min, energy_zero): the
+# compression and the fields of SchwarzConstants (a law reads those it needs).
+@njit(cache=True)
+def schwarz_force_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """Attached-branch force ``f(delta) = fc + (t^3 - 3 sigma)^2``, ``t^3`` by ``pow``."""
+    t = branch_t(delta, sigma, t_min, delta_min)
+    return schwarz_force_of_cube(math.pow(t, 3.0), fc, sigma)
+
+
+@njit(cache=True)
+def schwarz_energy_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """Attached-branch energy ``V(delta) = P(t) - P(t0)`` (``energy_zero = P(t0)``), ``pow``."""
+    t = branch_t(delta, sigma, t_min, delta_min)
+    return schwarz_antiderivative_libm(t, fc, sigma) - energy_zero
+
+
+@njit(cache=True, error_model="numpy")
+def schwarz_stiffness_libm(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """``df/d delta = 6 t^2 (t^3 - 3 sigma) / (4 (t^3 - sigma))`` on the attached branch
+    (units eta / p; infinite at ``delta_min``), ``t^3`` by ``pow``."""
+    t = branch_t(delta, sigma, t_min, delta_min)
+    t3 = math.pow(t, 3.0)
+    return 6.0 * t * t * (t3 - 3.0 * sigma) / (4.0 * (t3 - sigma))
+
+
+# ---- Hertz ----------------------------------------------------------------------------------
+@njit(cache=True)
+def hertz_force_of(dp):
+    """Hertz force of the positive part ``dp = delta_+``: ``dp^(3/2)`` (units eta)."""
+    return dp * math.sqrt(dp)
+
+
+@njit(cache=True)
+def hertz_energy_of(dp):
+    """Hertz energy of ``dp = delta_+``: ``0.4 dp^(5/2)`` (units eta p)."""
+    return 0.4 * dp * dp * math.sqrt(dp)
+
+
+@njit(cache=True)
+def hertz_stiffness_of(dp):
+    """Hertz stiffness of ``dp = delta_+``: ``1.5 dp^(1/2)`` (units eta / p)."""
+    return 1.5 * math.sqrt(dp)
+
+
+@njit(cache=True)
+def positive_part_numpy(delta):
+    """``np.maximum(delta, 0.0)``: ``+0.0`` for ``-0.0`` and for negatives, NaN kept (numba's
+    ``max(delta, 0.0)`` keeps ``-0.0``)."""
+    return 0.0 if delta <= 0.0 else delta
+
+
+@njit(cache=True)
+def hertz_force(delta):
+    """Hertz force ``delta_+^(3/2)`` (units eta), ``delta_+ = max(delta, 0)``."""
+    return hertz_force_of(max(delta, 0.0))
+
+
+@njit(cache=True)
+def hertz_energy(delta):
+    """Hertz energy ``0.4 delta_+^(5/2)`` (units eta p), ``delta_+ = max(delta, 0)``."""
+    return hertz_energy_of(max(delta, 0.0))
+
+
+@njit(cache=True)
+def hertz_force_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """:func:`hertz_force` with numpy's positive part (:func:`positive_part_numpy`); the
+    Schwarz constants are not read."""
+    return hertz_force_of(positive_part_numpy(delta))
+
+
+@njit(cache=True)
+def hertz_energy_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """:func:`hertz_energy` with numpy's positive part (:func:`positive_part_numpy`)."""
+    return hertz_energy_of(positive_part_numpy(delta))
+
+
+@njit(cache=True)
+def hertz_stiffness_numpy(delta, fc, sigma, t_min, delta_min, energy_zero):
+    """Hertz stiffness ``1.5 delta_+^(1/2)`` with numpy's positive part."""
+    return hertz_stiffness_of(positive_part_numpy(delta))
+
+
+#: The NumPy side's laws by kind: ``(force, energy, stiffness)``, each a scalar function of
+#: ``(delta, *SchwarzConstants)`` that :func:`numpy_law` lifts to a ufunc.
+NUMPY_LAWS = {
+    "schwarz": (schwarz_force_libm, schwarz_energy_libm, schwarz_stiffness_libm),
+    "hertz": (hertz_force_numpy, hertz_energy_numpy, hertz_stiffness_numpy),
+}
+QUANTITIES = ("force", "energy", "stiffness")
+
+
+# ---- the fast kernel's forms: constants in a SchwarzConstants record, powers as products ----
+@njit(cache=True)
 def schwarz_force(delta, law):
-    """Attached-branch force ``f(delta) = fc + (t^3 - 3 sigma)^2`` (units eta)."""
+    """Attached-branch force ``f(delta) = fc + (t^3 - 3 sigma)^2`` (units eta), ``t^3`` as
+    ``t*t*t``."""
     t = branch_t(delta, law.sigma, law.t_min, law.delta_min)
-    u = t * t * t - 3.0 * law.sigma
-    return law.fc + u * u
+    return schwarz_force_of_cube(t * t * t, law.fc, law.sigma)
 
 
 @njit(cache=True)
 def schwarz_energy(delta, law):
-    """Contact energy ``V(delta) = P(t) - P(t0)`` on the attached branch (units eta p)."""
-    sg, fc = law.sigma, law.fc
-    t = branch_t(delta, sg, law.t_min, law.delta_min)
-    t3 = t * t * t
-    p = (0.4 * t3 * t3 * t3 * t - 4.0 * sg * t3 * t3 * t + (fc + 15.0 * sg * sg) * t3 * t
-         - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
-    return p - law.energy_zero
+    """Contact energy ``V(delta) = P(t) - P(t0)`` on the attached branch (units eta p), the
+    powers as products."""
+    t = branch_t(delta, law.sigma, law.t_min, law.delta_min)
+    return schwarz_antiderivative_products(t, law.fc, law.sigma) - law.energy_zero
 
 
 @njit(cache=True)
@@ -115,27 +261,11 @@ def schwarz_mean_force(delta0, delta1, law):
         tau = mid + half * GL_X[k]
         t3 = tau * tau * tau
         wk = GL_W[k] * (t3 - sg)
-        u = t3 - 3.0 * sg
-        num += wk * (fc + u * u)
+        num += wk * schwarz_force_of_cube(t3, fc, sg)
         den += wk
     if den <= 0.0:
-        u = t0 * t0 * t0 - 3.0 * sg
-        return fc + u * u
+        return schwarz_force_of_cube(t0 * t0 * t0, fc, sg)
     return num / den
-
-
-@njit(cache=True)
-def hertz_force(delta):
-    """Hertz force ``delta_+^(3/2)`` (units eta)."""
-    dp = max(delta, 0.0)
-    return dp * math.sqrt(dp)
-
-
-@njit(cache=True)
-def hertz_energy(delta):
-    """Hertz energy ``0.4 delta_+^(5/2)`` (units eta p)."""
-    dp = max(delta, 0.0)
-    return 0.4 * dp * dp * math.sqrt(dp)
 
 
 @njit(cache=True)
@@ -154,34 +284,94 @@ def law_energy(delta, hertz, law):
     return schwarz_energy(delta, law)
 
 
+# ---- the force table's spline (mdgran.contact.ContactTable) ---------------------------------
+@njit(inline="always")
+def spline_cubic(c0, c1, c2, c3, x):
+    """One interval's cubic, highest power first, in Horner form:
+    ``((c0 x + c1) x + c2) x + c3``."""
+    return ((c0 * x + c1) * x + c2) * x + c3
+
+
+@njit(inline="always")
+def spline_locate(delta, base, scale, top, h):
+    """``(i, x)``: the interval ``i`` of a table with nodes uniform in ``w = sqrt(delta - base)``
+    (``scale = 1 / h`` nodes per unit of w; the coordinate clamped to ``top`` just below the
+    last node) and the offset ``x = w - w_i``."""
+    w = math.sqrt(max(delta - base, 0.0))
+    s = min(w * scale, top)
+    i = int(s)
+    return i, (s - i) * h
+
+
+@njit(cache=True)
+def spline_values(coef, base, scale, top, h, delta):
+    """The table's spline ([n - 1, 4] coefficients ``coef``) at each of ``delta`` (1-D; NaN
+    where ``delta`` is not finite)."""
+    out = np.empty(delta.shape[0])
+    for k in range(delta.shape[0]):
+        if not math.isfinite(delta[k]):
+            out[k] = math.nan
+            continue
+        i, x = spline_locate(delta[k], base, scale, top, h)
+        out[k] = spline_cubic(coef[i, 0], coef[i, 1], coef[i, 2], coef[i, 3], x)
+    return out
+
+
+# ---- lifted over arrays: numpy ufuncs of the scalar functions --------------------------------
 _UFUNCS: dict = {}
 
 
-def branch_t_ufunc():
-    """:func:`branch_t` as a numpy ufunc ``(delta, sigma, t_min, delta_min) -> t`` (compiled
-    on first use, cached on disk), for :meth:`mdgran.contact.ContactLaw.t_of_delta`: the plain
-    numpy ufunc under numba's dynamic one (whose Python-level call costs ~5 us more)."""
-    if "branch_t" not in _UFUNCS:
+def lifted(fn):
+    """The compiled scalar function ``fn`` (float64 arguments and result) as a numpy ufunc,
+    compiled on first use and cached on disk: the plain numpy ufunc under numba's dynamic one
+    (whose Python-level call costs ~5 us more).  Elementwise the same operations as ``fn``."""
+    name = fn.__name__
+    if name not in _UFUNCS:
         from numba import vectorize
 
-        _UFUNCS["branch_t"] = vectorize(["float64(float64, float64, float64, float64)"],
-                                        cache=True)(branch_t.py_func).ufunc
-    return _UFUNCS["branch_t"]
+        py = fn.py_func
+        sig = "float64(" + ", ".join(["float64"] * py.__code__.co_argcount) + ")"
+        _UFUNCS[name] = vectorize([sig], cache=True)(py).ufunc
+    return _UFUNCS[name]
 
 
-def _libm_pow(x, y):
-    return math.pow(x, y)
+def numpy_law(kind: str, quantity: str):
+    """The ufunc ``(delta, fc, sigma, t_min, delta_min, energy_zero) -> value`` of ``quantity``
+    (``"force"``, ``"energy"`` or ``"stiffness"``) of a law of ``kind`` (:data:`NUMPY_LAWS`)."""
+    return lifted(NUMPY_LAWS[kind][QUANTITIES.index(quantity)])
 
 
-def pow_ufunc():
-    """``math.pow`` (the C library's ``pow``) as a numpy ufunc ``(x, y) -> x^y``, for the
-    t-polynomials of :mod:`mdgran.contact` and :mod:`mdgran.chain`.  numpy's own ``**`` on
-    arrays takes SIMD code on AVX-512 machines (SVML, not correctly rounded: 5% of ``t**3``
-    differ in the last bit) and the C library elsewhere; the compiled kernels call ``pow``.
-    With this ufunc the oracle's values are the same on every machine, and bitwise the
-    kernels'."""
-    if "pow" not in _UFUNCS:
-        from numba import vectorize
+# ---- the C++ fix's constants ----------------------------------------------------------------
+CXX_HEADER = "law_constants.h"
 
-        _UFUNCS["pow"] = vectorize(["float64(float64, float64)"], cache=True)(_libm_pow).ufunc
-    return _UFUNCS["pow"]
+
+def cxx_header() -> str:
+    """The text of ``mdgran/lammps_plugin/law_constants.h``: the numerical constants above as
+    C++ ``constexpr`` values (``repr`` digits: the same doubles)."""
+    def arr(v):
+        return "{" + ", ".join(repr(float(x)) for x in v) + "}"
+
+    lines = [
+        "// Generated by mdgran.contact_scalar.cxx_header() from mdgran/contact_scalar.py: do not",
+        "// edit (python -m mdgran.contact_scalar writes it; tests/test_contact_scalar.py checks).",
+        "#ifndef MDGRAN_LAW_CONSTANTS_H",
+        "#define MDGRAN_LAW_CONSTANTS_H",
+        "namespace mdgran_law {",
+        f"constexpr int NEWTON_STEPS = {NEWTON_STEPS};",
+        f"constexpr double GL_X[5] = {arr(GL_NODES)};",
+        f"constexpr double GL_W[5] = {arr(GL_WEIGHTS)};",
+        f"constexpr double SING_BAND = {SING_BAND!r};",
+        f"constexpr double FC_DMT = {FC_DMT!r};",
+        f"constexpr double FC_JKR = {FC_JKR!r};",
+        f"constexpr double COS_LAMBDA = {COS_LAMBDA!r};",
+        f"constexpr double COS_ALPHA = {COS_ALPHA!r};",
+        "}  // namespace mdgran_law",
+        "#endif",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    from pathlib import Path
+
+    (Path(__file__).resolve().parent / "lammps_plugin" / CXX_HEADER).write_text(cxx_header())

@@ -40,7 +40,7 @@ from functools import cached_property
 import numpy as np
 
 from .contact import ContactLaw, fc_from_lambda
-from .contact_scalar import branch_t_ufunc, pow_ufunc, schwarz_constants
+from .contact_scalar import numpy_law, schwarz_constants
 
 
 def pair_ratios(s, k, a, walls: bool, adhesion=None):
@@ -133,53 +133,32 @@ class Mixture:
         own = np.array([law.loop_energy for law in self.laws])[self.law_index]
         return self.force_scale * self.length_scale * own
 
-    def _t(self, u, k=None):
-        fc, sg, tm, dm, _ = self._constants
-        if k is not None:
-            sg, tm, dm = sg[k], tm[k], dm[k]
-        return branch_t_ufunc()(np.asarray(u, dtype=float), sg, tm, dm)
+    def _own(self, k):
+        """Per-contact ``(fc, sigma, t_min, delta_min, P(t0))`` of all contacts or of ``k``."""
+        return self._constants if k is None else tuple(c[k] for c in self._constants)
+
+    def _law(self, quantity, delta, k):
+        """``(A, L, value)``: the scales of all contacts (or of ``k``) and their own law's
+        ``quantity`` at ``delta / L`` (:func:`~mdgran.contact_scalar.numpy_law`)."""
+        A, L = self._scales(k)
+        u = np.asarray(delta, dtype=float) / L
+        with np.errstate(divide="ignore"):
+            return A, L, numpy_law(self.law.kind, quantity)(u, *self._own(k))
 
     def force(self, delta, k=None):
         """Force of each closed contact at compression ``delta`` [..., m] (or of contacts
         ``k`` at ``delta`` [len(k)]), units eta0: ``A f(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            up = np.maximum(u, 0.0)
-            return A * (up * np.sqrt(up))
-        fc, sg = self._constants[0], self._constants[1]
-        if k is not None:
-            fc, sg = fc[k], sg[k]
-        w = pow_ufunc()(self._t(u, k), 3.0) - 3.0 * sg
-        return A * (fc + w * w)
+        A, _, f = self._law("force", delta, k)
+        return A * f
 
     def energy(self, delta, k=None):
         """Energy of each closed contact at ``delta``, units eta0 p0: ``A L V(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            up = np.maximum(u, 0.0)
-            return (A * L) * (0.4 * up * up * np.sqrt(up))
-        fc, sg, _, _, p0 = self._constants
-        if k is not None:
-            fc, sg, p0 = fc[k], sg[k], p0[k]
-        t = self._t(u, k)
-        pw = pow_ufunc()  # the C library's pow, as ContactLaw's
-        p = (0.4 * pw(t, 10.0) - 4.0 * sg * pw(t, 7.0) + (fc + 15.0 * sg * sg) * pw(t, 4.0)
-             - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
-        return (A * L) * (p - p0)
+        A, L, e = self._law("energy", delta, k)
+        return (A * L) * e
 
     def stiffness(self, delta, k=None):
         """``dF/d delta`` of each closed contact, units eta0 / p0: ``(A / L) f'(delta / L)``."""
-        A, L = self._scales(k)
-        u = np.asarray(delta, dtype=float) / L
-        if self.hertz:
-            return (A / L) * (1.5 * np.sqrt(np.maximum(u, 0.0)))
-        sg = self._constants[1] if k is None else self._constants[1][k]
-        t = self._t(u, k)
-        t3 = pow_ufunc()(t, 3.0)
-        with np.errstate(divide="ignore"):
-            own = 6.0 * t * t * (t3 - 3.0 * sg) / (4.0 * (t3 - sg))
+        A, L, own = self._law("stiffness", delta, k)
         return (A / L) * own
 
     def _scales(self, k):

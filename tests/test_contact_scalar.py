@@ -1,11 +1,14 @@
-"""The compiled scalar law (mdgran.contact_scalar, the fast kernel's) against the numpy law of
-mdgran.contact, which evaluates the same polynomials independently (numpy's ``**`` instead of
-products), and against the integral identities the kernel relies on."""
+"""The compiled scalar law (mdgran.contact_scalar): the fast kernel's forms (powers of t as
+products) against the numpy law of mdgran.contact (the C library's ``pow``, lifted as ufuncs),
+against the integral identities the kernel relies on, and the C++ fix's constants table."""
+from pathlib import Path
+
 
 import numpy as np
 import pytest
 
 from mdgran.contact import ContactLaw
+from mdgran import contact_scalar
 from mdgran.contact_scalar import (branch_t, hertz_energy, hertz_force, law_energy, law_force,
                                    schwarz_constants, schwarz_energy, schwarz_force,
                                    schwarz_mean_force)
@@ -65,3 +68,14 @@ def test_hertz_scalar_law():
         assert hertz_energy(d) == pytest.approx(0.4 * max(d, 0.0) ** 2.5, rel=1e-15)
         assert law_force(d, True, k) == hertz_force(d)
         assert law_energy(d, True, k) == hertz_energy(d)
+
+
+def test_cxx_constants_header_is_generated_from_the_python_constants():
+    """law_constants.h, which the C++ fix includes, is cxx_header()'s text (regenerate it
+    with ``python -m mdgran.contact_scalar``), and it holds the values the Python side uses."""
+    header = Path(contact_scalar.__file__).parent / "lammps_plugin" / contact_scalar.CXX_HEADER
+    text = header.read_text()
+    assert text == contact_scalar.cxx_header()
+    assert "NEWTON_STEPS = 7;" in text and "SING_BAND = 0.1;" in text
+    assert np.sum(contact_scalar.GL_W) == pytest.approx(2.0, rel=1e-15)  # Gauss-Legendre
+    assert np.allclose(np.polynomial.legendre.leggauss(5)[0], contact_scalar.GL_X, atol=1e-15)

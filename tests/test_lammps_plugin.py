@@ -13,6 +13,7 @@ import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
 from mdgran.backends import native_plugin
+from mdgran.contact import FC_DMT, FC_JKR, ContactLaw, fc_from_lambda
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 
@@ -249,3 +250,43 @@ write_dump all custom final.b id x vx modify sort id format float %.17g
     assert last[0] == last[1]  # D_hysteresis, D_viscous (and W) carried over
     if drive:
         assert float(last[0][3]) > 1.0  # the pulse did work (J = 2 A T / pi = 11.5)
+
+
+@pytest.mark.parametrize("fix_law, law", [
+    ("law schwarz lambda 0.64", ContactLaw("schwarz", fc_from_lambda(0.64))),
+    ("law schwarz fc -1.7 snap_off force", ContactLaw("schwarz", -1.7, "force")),
+    ("law jkr", ContactLaw("schwarz", FC_JKR)),
+    ("law dmt", ContactLaw("schwarz", FC_DMT)),
+    ("law hertz", ContactLaw("hertz", 0.0)),
+], ids=["schwarz", "schwarz-force", "jkr", "dmt", "hertz"])
+def test_native_law_is_the_python_law_on_a_grid(plugin, fix_law, law):
+    """The C++ fix's exact law (its own code, constants from law_constants.h) against
+    ContactLaw on 81 compressions of the attached branch, from just above snap-off to 40: two
+    free beads, the first displaced by delta, ``run 0`` each; the second atom's force is the
+    contact force, the fix's scalar its energy.  Measured: equal bit for bit."""
+    from mdgran.lammps_env import new_lammps
+
+    lmp = new_lammps()
+    try:
+        for cmd in [*native_plugin.load_commands(plugin), "units lj", "atom_style atomic",
+                    "atom_modify map array", "boundary f f f",
+                    "region box block -100 100 -1 1 -1 1", "create_box 1 box",
+                    "create_atoms 1 single 0 0 0", "create_atoms 1 single 1 0 0", "mass 1 1.0",
+                    "pair_style none", f"fix contact all mdgran/chain {fix_law} walls no",
+                    "run 0"]:
+            lmp.command(cmd)
+        deltas = np.concatenate([law.delta_off + np.geomspace(1e-9, 1.0, 40),
+                                 np.linspace(law.delta_off + 1.0, 40.0, 41)])
+        force, energy = [], []
+        for d in deltas:
+            lmp.command(f"set atom 1 x {float(d)!r}")
+            lmp.command("set atom 2 x 1.0")
+            lmp.command("run 0")
+            ids = lmp.numpy.extract_atom("id")
+            force.append(float(lmp.numpy.extract_atom("f")[list(ids).index(2), 0]))
+            energy.append(float(lmp.extract_fix("contact", 0, 0)))
+    finally:
+        lmp.close()
+    assert np.ptp(force) > 250.0  # the compressions really were set
+    assert np.array_equal(force, law.force(deltas))
+    assert np.array_equal(energy, law.energy(deltas))

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 from ..contact import ContactTable
-from ..contact_scalar import schwarz_constants
+from ..contact_scalar import SING_BAND, schwarz_constants
 from ..scene import SceneError
 from . import fast_kernel as fk
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
@@ -166,7 +166,7 @@ class FastBackend(Backend):
         self.params = fk.Params(
             gap=float(m.gap), damping=float(m.damping), k1=float(m.k1), k3=float(m.k3),
             delta_off=float(law.delta_off), delta_max=self.table.delta_max,
-            mean_force_below=law.delta_min + fk.SING_BAND if singular else -math.inf,
+            mean_force_below=law.delta_min + SING_BAND if singular else -math.inf,
             law=schwarz_constants(law), table=table,
             mix=fk.no_mix() if m.mixture is None else self._mix(self.table.n, delta_max, exact),
             sub_damping=float(m.substrate_damping), drive=fk.drive_record(m.drive))
@@ -206,7 +206,7 @@ class FastBackend(Backend):
                   for law in (laws if not exact else laws[:1])]
         cls = np.asarray(mix.law_index, dtype=np.int64)
         table = [tables[c if not exact else 0] for c in cls]  # (exact: never read)
-        below = np.array([law.delta_min + fk.SING_BAND if law.kind == "schwarz"
+        below = np.array([law.delta_min + SING_BAND if law.kind == "schwarz"
                           and law.snap_off == "displacement" and law.t_min > 0.0
                           else -math.inf for law in laws])
         inv_mass = 1.0 / np.asarray(mix.mass, dtype=float)

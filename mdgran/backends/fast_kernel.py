@@ -96,7 +96,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ..contact_scalar import SchwarzConstants, law_energy, law_force, schwarz_mean_force
+from ..contact_scalar import (SchwarzConstants, law_energy, law_force, schwarz_mean_force,
+                              spline_cubic)
 
 # status codes (counters.status)
 OK, OUT_OF_TABLE, CHATTER, TOO_MANY_SUBSTEPS, EVENTS_FULL, EVENT_OVERFLOW = 0, 1, 2, 3, 4, 5
@@ -110,9 +111,8 @@ SIMULTANEOUS = 1e-12  # events within SIMULTANEOUS * (1 + t) of the earliest swi
 STATE_TOL = 1e-12
 FLAG_CAP = 64  # flagged contacts remembered per pass (beyond: all contacts are scanned)
 CHAT_CAP = 64
-#: Closed contacts with delta below delta_min + SING_BAND get the mean-force kick (Schwarz,
-#: displacement rule); see `segment_pass`.
-SING_BAND = 0.1
+#: Closed contacts with delta below delta_min + SING_BAND (mdgran.contact_scalar) get the
+#: mean-force kick (Schwarz, displacement rule); see `segment_pass`.
 #: Contacts per segment of a pass (:class:`Segments`): the unit the threads share.  It depends
 #: on nothing but this constant, so a run's result does not depend on the thread count; a
 #: chain of at most SEGMENT contacts is one segment, and its pass is the serial one.
@@ -453,7 +453,7 @@ def spline(table, w):
     i = int(w)
     x = (w - i) * table.step
     k = U4 * np.uint64(i)  # unsigned: no negative-index wraparound code on c[k]
-    return ((c[k] * x + c[k + U1]) * x + c[k + U2]) * x + c[k + U3]
+    return spline_cubic(c[k], c[k + U1], c[k + U2], c[k + U3], x)
 
 
 @njit(inline="always")
@@ -512,9 +512,8 @@ def class_spline(params, k, u):
     i = int(w)
     x = (w - i) * pair_at(params, k, P_STEP)
     n = np.uint64(pair_at(params, k, P_FIRST)) + U4 * np.uint64(i)
-    f = ((params.mix.coef[n] * x + params.mix.coef[n + U1]) * x
-         + params.mix.coef[n + U2]) * x + params.mix.coef[n + U3]
-    return f, True
+    c = params.mix.coef
+    return spline_cubic(c[n], c[n + U1], c[n + U2], c[n + U3], x), True
 
 
 @njit(inline="always")

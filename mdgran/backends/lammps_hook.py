@@ -42,13 +42,14 @@ from typing import NamedTuple
 
 from numba import njit
 
-NEWTON_STEPS = 7  # as mdgran/contact.py
+from ..contact_scalar import (hertz_energy, hertz_force, schwarz_energy_libm, schwarz_force_libm,
+                              spline_cubic, spline_locate)
 
 # indices of the float parameters (``par``) and of the integer ones (``ipar``)
 P_GAP, P_DAMPING, P_K1, P_K3, P_DT, P_DELTA_OFF = 0, 1, 2, 3, 4, 5
-P_FC, P_SIGMA, P_TM, P_BIG, P_SQRT_BIG, P_DELTA_MIN, P_P0 = 6, 7, 8, 9, 10, 11, 12
-P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX, P_K1_TETHER = 13, 14, 15, 16, 17, 18
-NPAR = 19
+P_FC, P_SIGMA, P_TM, P_DELTA_MIN, P_P0 = 6, 7, 8, 9, 10
+P_BASE, P_SCALE, P_H, P_TOP, P_DELTA_MAX, P_K1_TETHER = 11, 12, 13, 14, 15, 16
+NPAR = 17
 I_WALLS, I_NTAGS, I_STRICT, I_HERTZ, I_TABLE, I_MIXED, I_SUB_DAMPED = 0, 1, 2, 3, 4, 5, 6
 NIPAR = 7
 
@@ -83,15 +84,11 @@ def parameters(model, law, table, dt, tether=False):
     par[P_DELTA_OFF] = float(law.delta_off)
     hertz = law.kind == "hertz"
     if not hertz:
-        tm = law.t_min
-        par[P_FC], par[P_SIGMA], par[P_TM] = law.fc, law.sigma, tm
-        par[P_BIG] = 6.0 * tm * tm
-        par[P_SQRT_BIG] = math.sqrt(6.0 * tm * tm)
-        par[P_DELTA_MIN] = law.delta_min
-        par[P_P0] = float(law._antiderivative((4.0 * law.sigma) ** (1.0 / 3.0)))
+        par[P_FC], par[P_SIGMA], par[P_TM] = law.fc, law.sigma, law.t_min
+        par[P_DELTA_MIN], par[P_P0] = law.delta_min, law.energy_zero
     if table is not None:
         par[P_BASE], par[P_SCALE], par[P_H] = table.base, table._scale, table._h
-        par[P_TOP] = table.n - 1 - 1e-9  # as ContactTable._locate
+        par[P_TOP] = table.top
         par[P_DELTA_MAX] = table.delta_max
     ipar[I_WALLS] = int(bool(model.walls))
     ipar[I_NTAGS] = model.n + 2 if model.walls else model.n
@@ -206,50 +203,28 @@ def drive_parameters(model):
 
 @njit(cache=True)
 def spline_force(coef, par, d):
-    """Cubic spline in ``w = sqrt(delta - base)``: ``ContactTable.force`` for one value."""
-    w = math.sqrt(max(d - par[P_BASE], 0.0))
-    s = min(w * par[P_SCALE], par[P_TOP])
-    i = int(s)
-    x = (s - i) * par[P_H]
-    return ((coef[i, 0] * x + coef[i, 1]) * x + coef[i, 2]) * x + coef[i, 3]
-
-
-@njit(cache=True)
-def t_of_delta(par, d):
-    """``ContactLaw.t_of_delta``: Newton on ``sqrt(delta - delta_min)`` (7 steps)."""
-    tm = par[P_TM]
-    big = par[P_BIG]
-    rhs = math.sqrt(max(d - par[P_DELTA_MIN], 0.0))
-    if tm == 0.0:  # DMT: phi(w) = w^2
-        return math.sqrt(rhs)
-    w = min(rhs / par[P_SQRT_BIG], math.sqrt(rhs))
-    for _ in range(NEWTON_STEPS):
-        sq = math.sqrt(w * w + 4.0 * tm * w + big)
-        w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * tm) / sq)
-    return tm + max(w, 0.0)
+    """``ContactTable.force`` for one value: the spline of :mod:`mdgran.contact_scalar`."""
+    i, x = spline_locate(d, par[P_BASE], par[P_SCALE], par[P_TOP], par[P_H])
+    return spline_cubic(coef[i, 0], coef[i, 1], coef[i, 2], coef[i, 3], x)
 
 
 @njit(cache=True)
 def exact_force(par, ipar, d):
-    """``ContactLaw.force``: ``delta_+^(3/2)`` (Hertz) or ``fc + (t^3 - 3 sigma)^2``."""
+    """``ContactLaw.force``: ``delta_+^(3/2)`` (Hertz) or ``fc + (t^3 - 3 sigma)^2``
+    (:mod:`mdgran.contact_scalar`'s scalar laws)."""
     if ipar[I_HERTZ]:
-        dp = max(d, 0.0)
-        return dp * math.sqrt(dp)
-    u = math.pow(t_of_delta(par, d), 3.0) - 3.0 * par[P_SIGMA]
-    return par[P_FC] + u * u
+        return hertz_force(d)
+    return schwarz_force_libm(d, par[P_FC], par[P_SIGMA], par[P_TM], par[P_DELTA_MIN],
+                              par[P_P0])
 
 
 @njit(cache=True)
 def law_energy(par, ipar, d):
     """``ContactLaw.energy``: ``(2/5) delta_+^(5/2)`` (Hertz) or ``P(t(delta)) - P(t0)``."""
     if ipar[I_HERTZ]:
-        dp = max(d, 0.0)
-        return 0.4 * dp * dp * math.sqrt(dp)
-    t = t_of_delta(par, d)
-    sg, fc = par[P_SIGMA], par[P_FC]
-    p = (0.4 * math.pow(t, 10.0) - 4.0 * sg * math.pow(t, 7.0)
-         + (fc + 15.0 * sg * sg) * math.pow(t, 4.0) - 4.0 * sg * (fc + 9.0 * sg * sg) * t)
-    return p - par[P_P0]
+        return hertz_energy(d)
+    return schwarz_energy_libm(d, par[P_FC], par[P_SIGMA], par[P_TM], par[P_DELTA_MIN],
+                               par[P_P0])
 
 
 @njit(cache=True)
@@ -264,11 +239,8 @@ def mixed_energy(mix, ipar, jt, d):
 def class_spline_force(coef, cpar, c, d):
     """:func:`spline_force` of law class ``c`` (``coef[c]``, ``cpar[c]``), indexing the
     class's rows in place (no view of them per contact)."""
-    w = math.sqrt(max(d - cpar[c, P_BASE], 0.0))
-    s = min(w * cpar[c, P_SCALE], cpar[c, P_TOP])
-    i = int(s)
-    x = (s - i) * cpar[c, P_H]
-    return ((coef[c, i, 0] * x + coef[c, i, 1]) * x + coef[c, i, 2]) * x + coef[c, i, 3]
+    i, x = spline_locate(d, cpar[c, P_BASE], cpar[c, P_SCALE], cpar[c, P_TOP], cpar[c, P_H])
+    return spline_cubic(coef[c, i, 0], coef[c, i, 1], coef[c, i, 2], coef[c, i, 3], x)
 
 
 @njit(cache=True)

@@ -30,7 +30,7 @@ from pathlib import Path
 
 SOURCE_DIR = Path(__file__).resolve().parents[1] / "lammps_plugin"
 SOURCES = ("fix_mdgran_chain.cpp", "mdgranplugin.cpp")
-HEADERS = ("fix_mdgran_chain.h", "lammpsplugin.h")
+HEADERS = ("fix_mdgran_chain.h", "lammpsplugin.h", "law_constants.h")
 PLUGIN = "mdgranplugin.so"  # the name LAMMPS_PLUGIN_PATH auto-loading looks for (*plugin.so)
 INFO = "mdgranplugin.json"
 FLAGS = ("-std=c++17", "-O2", "-fPIC", "-shared", "-ffp-contract=off", "-DLAMMPS_SMALLBIG")

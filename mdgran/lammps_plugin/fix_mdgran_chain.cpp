@@ -98,6 +98,7 @@
 // are synced at set-up and at the end of every run, and when a global output is asked for
 // (thermo, extract_fix).
 #include "fix_mdgran_chain.h"
+#include "law_constants.h"
 
 #include "atom.h"
 #include "comm.h"
@@ -119,7 +120,11 @@
 using namespace LAMMPS_NS;
 using namespace FixConst;
 
-static constexpr int NEWTON_STEPS = 7;    // as mdgran/contact.py
+// the law's numerical constants, one table with mdgran/contact_scalar.py (law_constants.h)
+using mdgran_law::NEWTON_STEPS;
+using mdgran_law::SING_BAND;
+using mdgran_law::GL_X;
+using mdgran_law::GL_W;
 static constexpr int T_BLOCK = 16;        // compressions inverted together (t_of_delta_n)
 static constexpr int NPERATOM = 4;        // stored in restart files: x0, closed, dprev, aprev
 static constexpr double RESTART_MARK = 77007001.0;    // "mdgran chain", restart format 1
@@ -133,13 +138,7 @@ static constexpr int WINDOW_MARGIN = 3;   // a window needs the atoms within thi
 static constexpr double SIMULTANEOUS = 1e-12;    // events within this * (1 + t) switch together
 static constexpr double STATE_TOL = 1e-12;    // a contact beyond its switching point by more
                                               // than this (units p) switches at once
-static constexpr double SING_BAND = 0.1;    // mean-force kick below delta_min + SING_BAND
 static constexpr double PI = 3.141592653589793;    // Python's math.pi (the pulse's sine)
-// 5-point Gauss-Legendre nodes and weights on [-1, 1]
-static constexpr double GL_X[5] = {-0.9061798459386640, -0.5384693101056831, 0.0,
-                                   0.5384693101056831, 0.9061798459386640};
-static constexpr double GL_W[5] = {0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
-                                   0.4786286704993665, 0.2369268850561891};
 
 FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     Fix(lmp, narg, arg), x0(nullptr), closed(nullptr), dprev(nullptr), aprev(nullptr),
@@ -180,8 +179,8 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     } else if (key == "base") base_file = val;
     else if (key == "law") {
       if (val == "hertz") hertz = 1;
-      else if (val == "jkr") { fc = -1.5; fc_given = 1; }
-      else if (val == "dmt") { fc = -2.0; fc_given = 1; }
+      else if (val == "jkr") { fc = mdgran_law::FC_JKR; fc_given = 1; }
+      else if (val == "dmt") { fc = mdgran_law::FC_DMT; fc_given = 1; }
       else if (val != "schwarz") error->all(FLERR, "fix mdgran/chain: unknown law {}", val);
     } else if (key == "fc") { fc = utils::numeric(FLERR, val, false, lmp); fc_given = 1; }
     else if (key == "lambda") lambda = utils::numeric(FLERR, val, false, lmp);
@@ -220,10 +219,10 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   if (located && integrate)
     error->all(FLERR, "fix mdgran/chain: integrate is for events quantized (located integrates)");
   if (!hertz && !fc_given) {
-    double alpha = (1.0 - std::exp(-lambda / 0.924)) / 1.02;
+    double alpha = (1.0 - std::exp(-lambda / mdgran_law::COS_LAMBDA)) / mdgran_law::COS_ALPHA;
     fc = -6.0 / (alpha * alpha + 3.0);
   }
-  if (!hertz && !(fc >= -2.0 && fc <= -1.5))
+  if (!hertz && !(fc >= mdgran_law::FC_DMT && fc <= mdgran_law::FC_JKR))
     error->all(FLERR, "fix mdgran/chain: fc must lie in [-2, -1.5], not {}", fc);
 
   set(hertz, fc, snap_force);
