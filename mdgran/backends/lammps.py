@@ -366,6 +366,7 @@ class LammpsBackend(Backend):
         self.stats["steps"] = int(lmp.extract_global("ntimestep"))
         if self.event_mode == "located":  # atoms the fix stepped (its activity front)
             self.stats["bead_steps"] = int(lmp.extract_fix("contact", 0, 1, 6))
+            self.stats["event_windows_joined"] = int(lmp.extract_fix("contact", 0, 1, 7))
 
     # ---- the contact hook ---------------------------------------------------------------
     def _start_hook(self, lmp):

@@ -84,7 +84,8 @@
 // the activity front with their contacts' rest energy); vector =
 // [D_hysteresis, D_viscous, number of events, external work, first and last tag of the moved
 // hull (take_in_moved_state: outside it every atom is at x0 and at rest; quantized: 1, N),
-// atoms stepped summed over the steps (located; quantized: 0)]; array = events [time, contact number (1..n+1
+// atoms stepped summed over the steps (located; quantized: 0), event windows joined with one
+// already stepped (summed over the ranks that stepped them)]; array = events [time, contact number (1..n+1
 // with walls, 2..n without), kind (1 close, 0 open), step]; per-atom vector = state of the
 // contact to the atom's right (1 closed).  With several MPI ranks each contact is owned by
 // the rank owning its left atom (events and dissipation there); the rank owning the right atom
@@ -240,7 +241,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   extscalar = 1;
   energy_global_flag = 1;
   vector_flag = 1;
-  size_vector = 7;
+  size_vector = 8;
   extvector = -1;    // the sums are extensive, the moved hull's tags are not
   array_flag = 1;
   size_array_rows = 0;
@@ -273,6 +274,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   moved_all[0] = 1.0;
   moved_all[1] = (double) ntags;
   bead_steps = bead_steps_all = 0.0;
+  joins = joins_all = 0.0;
   if (!mixture_file.empty()) read_mixture(mixture_file.c_str());
   if (!base_file.empty()) read_base(base_file.c_str());
   driven = pulse_tag != 0 || based;
@@ -297,7 +299,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   ncompute = 0;
   energy_at = -1;
   energy_cache = 0.0;
-  ext_flags = {1, 1, 1, 1, 0, 0, 1};    // last: an error above must not leave it to Fix to free
+  ext_flags = {1, 1, 1, 1, 0, 0, 1, 1};    // last: an error above must not leave it to Fix to free
   extlist = ext_flags.data();        // ours (the destructor sets it back to null)
 }
 
@@ -879,9 +881,10 @@ void FixMdgranChain::sync()
   MPI_Allreduce(hull, both, 2, MPI_DOUBLE, MPI_MIN, world);
   moved_all[0] = both[0];
   moved_all[1] = -both[1];
-  double stepped = bead_steps, stepped_all = 0.0;
-  MPI_Allreduce(&stepped, &stepped_all, 1, MPI_DOUBLE, MPI_SUM, world);
-  bead_steps_all = stepped_all;
+  double tallies[2] = {bead_steps, joins}, tallies_all[2];
+  MPI_Allreduce(tallies, tallies_all, 2, MPI_DOUBLE, MPI_SUM, world);
+  bead_steps_all = tallies_all[0];
+  joins_all = tallies_all[1];
   double part[3] = {d_hyst, d_visc, work}, sum[3];
   MPI_Allreduce(part, sum, 3, MPI_DOUBLE, MPI_SUM, world);
   d_hyst_all += sum[0];
@@ -2378,6 +2381,7 @@ void FixMdgranChain::local_events(double t0, double dt, double &viscous, double 
     wout.resize(outs);
     widen(k, grow);
     if (k > 0 && wins[k].lo <= wins[k - 1].hi + 2) {    // reaches a window already stepped
+      joins += 1.0;
       wins[k - 1].hi = wins[k].hi;
       wins.erase(wins.begin() + (long) k);
       widen(k - 1, 0);
@@ -2469,6 +2473,7 @@ double FixMdgranChain::compute_vector(int n)
   if (n == 2) return (double) ev_all.size();
   if (n == 3) return work_all;
   if (n == 6) return comm->nprocs > 1 ? bead_steps_all : bead_steps;
+  if (n == 7) return comm->nprocs > 1 ? joins_all : joins;
   if (!located) return n == 4 ? 1.0 : (double) ntags;    // every atom is stepped
   if (comm->nprocs > 1) return moved_all[n - 4];
   return n == 4 ? (double) moved_lo : (double) moved_hi;

@@ -190,6 +190,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   tagint moved_lo, moved_hi;                // every atom this rank changed or found moved
   double moved_all[2];                      // their hull over the ranks at the last sync
   double bead_steps, bead_steps_all;        // atoms stepped (this rank; all, at the last sync)
+  double joins, joins_all;                  // event windows joined with one already stepped
   std::vector<int> ext_flags;               // extlist: which vector values are extensive
   void take_in_moved_state();
   int front_holds_still() const;
