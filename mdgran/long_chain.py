@@ -150,14 +150,16 @@ def _summary(profile: dict, res) -> dict:
 
 def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS,
                      duration: float = 100.0, progress=None,
-                     cross_check: str | None = "lammps:native") -> dict:
+                     cross_check: str | None = "lammps:native", check_n: int | None = None,
+                     check_ranks: int = 1) -> dict:
     """The pulse on chains of ``sizes`` beads (v0 = 12), then on the longest for each of
     ``velocities`` and (at v0 = 100) each of ``lambdas``; draws ``figure``; returns the
     numbers: per run its :func:`pulse_profile` summary and status, ``converged``: for each
     size, the largest difference of its ``peak_v`` from the longest chain's over its own
     beads (exactly 0 once the chain is longer than the pulse's reach), and ``cross_check``:
-    the longest chain at v0 = 12 again on the backend ``cross_check``
-    (:func:`compare_backends`; None: not run)."""
+    the pulse at v0 = 12 again on the backend ``cross_check``, on ``check_n`` beads (default:
+    the longest chain's) over ``check_ranks`` MPI ranks (:func:`compare_backends`; None: not
+    run)."""
     say = progress or (lambda m: None)
     longest = max(sizes)
     runs, done = {}, {}
@@ -175,9 +177,11 @@ def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS
     draw(runs, figure)
     check = None
     if cross_check is not None:
-        say(f"long chain: {longest} beads, v0 = 12 on {cross_check}")
-        check = compare_backends(runs[("size", longest, 12.0, None)], longest, duration,
-                                 cross_check)
+        n_check = int(check_n or longest)
+        say(f"long chain: {n_check} beads, v0 = 12 on {cross_check}"
+            + (f", {check_ranks} MPI ranks" if check_ranks > 1 else ""))
+        check = compare_backends(runs[("size", longest, 12.0, None)], n_check, duration,
+                                 cross_check, check_ranks)
     return {"duration": duration, "converged_peak_v": converged,
             "runs": [{"varies": key, **_summary(*pr)}
                      for (key, n, v0, lam), pr in runs.items()],
@@ -190,28 +194,75 @@ def long_chain_study(figure, sizes=SIZES, velocities=VELOCITIES, lambdas=LAMBDAS
 CROSS_CHECK_TOLERANCE = 1e-8
 
 
-def compare_backends(fast_run, n: int, duration: float, backend: str) -> dict:
-    """The pulse of ``fast_run`` (:func:`run_pulse` of ``n`` beads at v0 = 12 on the fast
-    backend) run again on ``backend``: the largest difference of the per-bead largest
-    speeds over v0, the reaches, the snap-offs, both wall times, and ``agree``
-    (:data:`CROSS_CHECK_TOLERANCE`, the same reach and snap-offs); ``unavailable`` with the
-    reason when the backend cannot run here (no LAMMPS)."""
+def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int = 1) -> dict:
+    """The pulse of ``fast_run`` (:func:`run_pulse` at v0 = 12 on the fast backend) run again
+    on ``backend`` on ``n`` beads (over ``ranks`` MPI ranks: :func:`run_pulse_on_ranks`):
+    the largest difference of the per-bead largest speeds over v0 on the beads both chains
+    have, the reaches, the snap-offs, both wall times, and ``agree``
+    (:data:`CROSS_CHECK_TOLERANCE`, the same reach and snap-offs; the pulse must end short of
+    both chains' ends for the measures to be the same); ``unavailable`` with the reason when
+    the backend cannot run here (no LAMMPS, no mpiexec)."""
     from .lammps_env import LammpsUnavailable
 
     try:
-        prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
-    except LammpsUnavailable as exc:
-        return {"backend": backend, "n": n, "unavailable": str(exc)}
+        if ranks > 1:
+            prof, status, wall = run_pulse_on_ranks(n, duration, backend, ranks)
+        else:
+            prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
+            status, wall = res.status, res.stats.get("wall_time_s")
+    except (LammpsUnavailable, OSError) as exc:
+        return {"backend": backend, "n": n, "ranks": ranks, "unavailable": str(exc)}
     ref, ref_res = fast_run
-    diff = float(np.max(np.abs(prof["peak_v"] - ref["peak_v"]))) / 12.0
-    out = {"backend": backend, "n": n, "status": res.status,
-           "max_peak_v_difference_over_v0": diff, "reach": [ref["reach"], prof["reach"]],
+    common = min(len(ref["peak_v"]), len(prof["peak_v"]))
+    diff = float(np.max(np.abs(prof["peak_v"][:common] - ref["peak_v"][:common]))) / 12.0
+    out = {"backend": backend, "n": n, "ranks": ranks, "fast_n": len(ref["peak_v"]),
+           "status": status, "max_peak_v_difference_over_v0": diff,
+           "reach": [ref["reach"], prof["reach"]],
            "snapoffs": [ref["snapoffs_total"], prof["snapoffs_total"]],
-           "wall_s": [ref_res.stats.get("wall_time_s"), res.stats.get("wall_time_s")]}
-    out["agree"] = bool(res.status == "complete" and diff <= CROSS_CHECK_TOLERANCE
-                        and out["reach"][0] == out["reach"][1]
+           "wall_s": [ref_res.stats.get("wall_time_s"), wall]}
+    out["agree"] = bool(status == "complete" and diff <= CROSS_CHECK_TOLERANCE
+                        and out["reach"][0] == out["reach"][1] < common
                         and out["snapoffs"][0] == out["snapoffs"][1])
     return out
+
+
+def run_pulse_on_ranks(n: int, duration: float, backend: str, ranks: int):
+    """:func:`run_pulse` at v0 = 12 on ``ranks`` MPI ranks (``mpiexec -n ranks python -m
+    mdgran.long_chain``: LAMMPS splits the chain over them); ``(profile, status, wall
+    seconds)`` with the profile's ``peak_v``, ``reach`` and ``snapoffs_total``.  Raises
+    OSError when the ranks cannot be started or the run stops."""
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "pulse.npz"
+        cmd = [mpiexec, "-n", str(ranks), sys.executable, "-m", "mdgran.long_chain", str(n),
+               repr(float(duration)), backend, str(out)]
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode or not out.exists():
+            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
+            raise OSError(f"{' '.join(cmd[:3])} ... exited {done.returncode}: {tail[0]}")
+        with np.load(out) as f:
+            prof = {"peak_v": f["peak_v"], "reach": int(f["reach"]),
+                    "snapoffs_total": int(f["snapoffs_total"])}
+            return prof, str(f["status"]), float(f["wall_s"])
+
+
+def _main(argv):
+    """``python -m mdgran.long_chain N DURATION BACKEND OUT.npz`` on every MPI rank:
+    :func:`run_pulse`, rank 0 writing the measures :func:`run_pulse_on_ranks` reads."""
+    from .simulation import mpi_rank
+
+    n, duration, backend, out = int(argv[0]), float(argv[1]), argv[2], argv[3]
+    prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
+    if mpi_rank() == 0:
+        np.savez(out, peak_v=prof["peak_v"], reach=prof["reach"],
+                 snapoffs_total=prof["snapoffs_total"], status=res.status,
+                 wall_s=res.stats.get("wall_time_s") or float("nan"))
 
 
 def draw(runs: dict, path):
@@ -250,3 +301,9 @@ def draw(runs: dict, path):
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+if __name__ == "__main__":
+    import sys
+
+    _main(sys.argv[1:])
