@@ -4,7 +4,7 @@ Each law is a small pure scalar function (numba ``njit``) with its formula in it
 every user lifts these over contacts with a thin wrapper: :class:`mdgran.contact.ContactLaw`,
 :mod:`mdgran.chain` and :mod:`mdgran.mixture` through numpy ufuncs (:func:`lifted`), the fast
 kernel (:mod:`mdgran.backends.fast_kernel`) and the LAMMPS hook
-(:mod:`mdgran.backends.lammps_hook`) by calling them in their compiled loops.  The C++ fix
+(``mdgran.backends.lammps_hook``) by calling them in their compiled loops.  The C++ fix
 (``mdgran/lammps_plugin/fix_mdgran_chain.cpp``) is the independent implementation: it keeps
 its own code and takes its numerical constants from ``law_constants.h``, which
 :func:`cxx_header` writes from the constants here.
