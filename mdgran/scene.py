@@ -360,6 +360,9 @@ OTHER_WAYS = {
 
 
 def _check_value(key: str, value, kind, allowed: str):
+    """``value`` of ``key`` checked against its schema ``kind`` (a tuple of choices, or a
+    kind name; ``?``: may be absent); a bad one is a :class:`SceneError` saying what is
+    ``allowed``.  Returns the value as the scene keeps it."""
     if isinstance(value, np.generic):  # a NumPy number or bool is one
         value = value.item()
     if value is None:
@@ -370,37 +373,64 @@ def _check_value(key: str, value, kind, allowed: str):
         if value not in kind:
             raise SceneError(key, f"must be {allowed}, not {value!r}")
         return value
+    base = kind.rstrip("?")
     if kind == "str":
         if not isinstance(value, str):
             raise SceneError(key, f"must be {allowed}")
         return value
     if kind.startswith("list:"):  # a number or a list of them, each of kind "list:KIND"
-        if not isinstance(value, list):
-            return _check_value(key, value, kind[5:], allowed)
-        if not value:
-            raise SceneError(key, f"must be {allowed}, not an empty list")
-        return [_check_value(key, v, kind[5:].rstrip("?"), allowed) for v in value]
-    if kind.rstrip("?") == "bool":
+        return _check_list(key, value, kind[5:], allowed)
+    if base == "bool":
         if not isinstance(value, bool):
             raise SceneError(key, f"must be {allowed}, not {value!r}")
         return value
     if kind.startswith("int"):
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and math.isfinite(value) and value.is_integer():
-                value = int(value)
-            else:
-                raise SceneError(key, f"must be {allowed}, not {value!r}")
-        if value < (0 if kind.rstrip("?") == "int>=0" else 1):
-            raise SceneError(key, f"must be {allowed}, not {value}")
-        return value
+        return _check_int(key, value, base, allowed)
     if kind == "values?":
         if not isinstance(value, list) or not 2 <= len(value) <= 1_000_000:
             raise SceneError(key, f"must be {allowed}")
         return [_check_value(key, v, "float", allowed) for v in value]
-    if kind.rstrip("?") == "ratios" and isinstance(value, list):
-        if not value:
-            raise SceneError(key, f"must be {allowed}, not an empty list")
-        return [_check_value(key, v, "ratio", allowed) for v in value]
+    if base == "ratios" and isinstance(value, list):
+        return _check_list(key, value, "ratio", allowed)
+    return _check_number(key, value, base, allowed)
+
+
+def _check_list(key: str, value, kind: str, allowed: str):
+    """A value of ``kind``, or a non-empty list of them."""
+    if not isinstance(value, list):
+        return _check_value(key, value, kind, allowed)
+    if not value:
+        raise SceneError(key, f"must be {allowed}, not an empty list")
+    return [_check_value(key, v, kind.rstrip("?"), allowed) for v in value]
+
+
+def _check_int(key: str, value, base: str, allowed: str) -> int:
+    """An integer (a float with an integer value is one) >= 0 (``int>=0``) or >= 1."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+            value = int(value)
+        else:
+            raise SceneError(key, f"must be {allowed}, not {value!r}")
+    if value < (0 if base == "int>=0" else 1):
+        raise SceneError(key, f"must be {allowed}, not {value}")
+    return value
+
+
+#: the range of each number kind (both ends included unless the test says otherwise)
+NUMBER_KINDS = {
+    "float>=0": lambda v: v >= 0,
+    "float>0": lambda v: v > 0,
+    "fc": lambda v: -2.0 <= v <= -1.5,
+    "tol": lambda v: 1e-14 <= v <= 1e-3,
+    "nu": lambda v: 0.0 <= v < 0.5,
+    "ratio": lambda v: 1e-3 <= v <= 1e3,
+    "ratios": lambda v: 1e-3 <= v <= 1e3,
+}
+
+
+def _check_number(key: str, value, base: str, allowed: str) -> float:
+    """A finite, normal (or zero) number in the range of its kind (:data:`NUMBER_KINDS`;
+    ``float``: any) and of its key (:data:`LIMITS`)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(key, f"must be {allowed}, not {value!r}")
     value = float(value)
@@ -409,14 +439,8 @@ def _check_value(key: str, value, kind, allowed: str):
     if value != 0.0 and abs(value) < sys.float_info.min:
         raise SceneError(key, f"{value!r} is subnormal (below 2.2e-308 in magnitude), which "
                          "LAMMPS cannot read; give 0 or a normal number")
-    base = kind.rstrip("?")
-    bad = ((base == "float>=0" and value < 0) or (base == "float>0" and value <= 0)
-           or (base == "fc" and not -2.0 <= value <= -1.5)
-           or (base == "tol" and not 1e-14 <= value <= 1e-3)
-           or (base == "nu" and not 0.0 <= value < 0.5)
-           or (base in ("ratio", "ratios") and not 1e-3 <= value <= 1e3))
     lo, hi = LIMITS.get(key, (-math.inf, math.inf))
-    if bad or not lo <= value <= hi:
+    if not NUMBER_KINDS.get(base, lambda v: True)(value) or not lo <= value <= hi:
         raise SceneError(key, f"must be {allowed}, not {value}")
     return value
 
