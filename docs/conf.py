@@ -72,7 +72,6 @@ nitpick_ignore = [
     ("py:class", "x_stored"),  # Run's "Attributes:"
     ("py:attr", "Scene.sources"),  # Scene's docstring
     ("py:meth", "force"),  # ContactTable's methods mirror ContactLaw's
-    ("py:meth", "draw"),  # progress.Terminal
     ("py:data", "LEDGER_NAMES"),  # run_record's ledger terms, listed in Run's docstring
     ("py:func", "_derive_beads"), ("py:func", "run_segments"),  # private; a compiled kernel
 ]  # a class's "Attributes:" as fields, not as a second description
