@@ -35,7 +35,7 @@ from .storage import write_atomic
 
 TTY_INTERVAL = 0.2  # s between redraws of a run's line on a terminal
 LOG_INTERVAL = 15.0  # s between lines elsewhere
-BAR = 20  # characters of a bar
+BAR, BAR_MIN = 20, 10  # characters of a bar; where a terminal is narrow
 
 
 def is_tty(stream) -> bool:
@@ -69,11 +69,13 @@ def say(text: str, stream=None):
 
 class Line(tqdm):
     """A tqdm bar counting to ``total`` on ``stream`` (standard error), laid out by
-    :meth:`layout` (its ``{bar}``: ``BAR`` characters, fewer where a terminal is too narrow),
-    drawn at most every ``interval`` seconds (default ``tty_interval`` on a terminal, 15
-    elsewhere) and when it closes.  On a terminal tqdm redraws it in place, cut to ``width - 1``
-    columns (default: the terminal's, read at every draw); elsewhere (``tty``: say which) each
-    draw is a whole line.  :attr:`shown`: drawn at least once."""
+    :meth:`layout`, drawn at most every ``interval`` seconds (default ``tty_interval`` on a
+    terminal, 15 elsewhere) and when it closes.  On a terminal tqdm redraws it in place, cut
+    to ``width - 1`` columns (default: the terminal's, read at every draw); where the line is
+    too long, its ``{bar}`` of ``BAR`` characters is shortened (to ``BAR_MIN``), then its
+    ``short`` layout used, then the end of its label (the role's details) cut, and tqdm cuts
+    what is still too long.  Elsewhere (``tty``: say which) each draw is a whole line.
+    :attr:`shown`: drawn at least once."""
 
     monitor_interval = 0  # no tqdm thread redrawing a stalled bar
 
@@ -83,25 +85,36 @@ class Line(tqdm):
         self.stream = stream if stream is not None else sys.stderr
         self.tty = is_tty(self.stream) if tty is None else tty
         self.shown = False
+        self._short, self._keep = False, None  # how far a terminal line was shortened
         if interval is None:
             interval = tty_interval if self.tty else LOG_INTERVAL
         super().__init__(total=total, file=self.stream, mininterval=interval, miniters=0,
                          smoothing=0, ncols=width - 1 if width else None,
                          dynamic_ncols=self.tty and not width, **kwargs)
 
-    def layout(self) -> tuple:
-        """``(bar_format, its fields beyond tqdm's)`` of the next draw."""
+    def layout(self, short: bool = False) -> tuple:
+        """``(bar_format, its fields beyond tqdm's)`` of the next draw; ``short``: for a
+        terminal too narrow for the whole line."""
         return "{desc}: {percentage:3.0f}%|{bar}|", {}
 
     @property
     def format_dict(self):
         d = super().format_dict
-        fmt, fields = self.layout()
-        d.update(fields)
-        if not self.tty or (d["ncols"] or 0) < 1:  # a log's lines are whole; so are those
-            d["ncols"] = None  # of a pseudo-terminal without a size (0 columns)
-        rest = self.format_meter(**{**d, "bar_format": fmt.replace("{bar}", ""), "ncols": None})
-        width = max(1, min(BAR, d["ncols"] - disp_len(rest))) if d["ncols"] else BAR
+        room = d["ncols"] if self.tty and (d["ncols"] or 0) > 0 else None  # a log's lines
+        d["ncols"] = room  # are whole; so are those of a pseudo-terminal without a size
+        for short in (self._short, True):  # (a line only gets shorter: no flicker)
+            fmt, fields = self.layout(short)
+            d.update(fields)
+            rest = disp_len(self.format_meter(**{**d, "bar_format": fmt.replace("{bar}", ""),
+                                                 "ncols": None}))
+            if room is None or rest + BAR_MIN <= room:
+                break
+        self._short = short
+        if room is not None and (rest + BAR_MIN > room or self._keep) and len(self.desc) > 18:
+            keep = max(16, len(self.desc) - max(0, rest + BAR_MIN - room) - 2)
+            self._keep = min(keep, self._keep or keep)
+            d["prefix"] = self.desc[:self._keep] + ".."
+        width = BAR if room is None else max(BAR_MIN, min(BAR, room - rest))
         d["bar_format"] = fmt.replace("{bar}", f"{{bar:{width}}}")
         return d
 
@@ -187,7 +200,8 @@ class ProgressReporter(Line):
 
     ``delay``: nothing is shown before the run has taken that long (a short run stays silent),
     0: a line at once.  ``interval``: seconds between draws (default 0.2 on a terminal, 15
-    elsewhere).  ``extra()``: text added after the time left (a series' time left);
+    elsewhere).  ``extra(short)``: text added after the time left (a series' time left;
+    ``short``: its short form, for a narrow terminal);
     ``on_close(status, elapsed)`` is called before the last line is drawn.  Once shown, the
     run's last line says 100 % (or how far it got, and the status word)."""
 
@@ -206,17 +220,21 @@ class ProgressReporter(Line):
         f = (self.n - self.initial) / (self.total - self.initial)
         return self.elapsed() / f if f >= 0.02 else math.nan
 
-    def layout(self) -> tuple:
+    def layout(self, short: bool = False) -> tuple:
+        """The line: label, percentage, bar, this run's time left (or ``starting``, or ``done
+        in``/the status word and the time taken), ``extra()``, ``t`` and the time taken;
+        ``short`` without ``t`` nor the time taken while running."""
         head = "{desc}: {percentage:3.0f}%|{bar}| "
-        more = self.extra() if self.extra is not None else ""
-        fields = {"more": f", {more}" if more else ""}
+        more = self.extra(short) if self.extra is not None else ""
+        fields = {"more": f", {more}" if more else "", "t": "" if short else
+                  "  t = {:.4g}/{:.4g}".format(self.n, self.total)}
         if self.status is not None:
             word = status_word(self.status)
             fields["end"] = "done in" if word == "complete" else f"{word} after"
-            return head + "{end} {elapsed}{more}  t = {n:.4g}/{total:.4g}", fields
+            return head + "{end} {elapsed}{more}{t}", fields
         if not self.started:
             return head + "starting{more}", fields
-        return head + "left ~{remaining}{more}  t = {n:.4g}/{total:.4g} in {elapsed}", fields
+        return head + "left ~{remaining}{more}" + ("" if short else "{t} in {elapsed}"), fields
 
     def report_block(self, block):
         """Show the time of the last frame of ``block`` (at most every ``interval``)."""
@@ -280,8 +298,9 @@ class RunSeries:
             return sum(other) / len(other) * (2.0 if kind == "refined" else 0.5)
         return None
 
-    def left(self) -> str:
-        """Time left for the series: the current run's and the pending runs' estimates."""
+    def left(self, short: bool = False) -> str:
+        """Time left for the series: the current run's and the pending runs' estimates
+        (``all runs left ~...``; ``short``: ``all ~...``)."""
         total, unknown = 0.0, {}
         if self.current is not None:
             key, rep = self.current
@@ -305,11 +324,12 @@ class RunSeries:
                 unknown[backend] = unknown.get(backend, 0) + 1
             else:
                 total += r * dur
+        head = "all ~" if short else "all runs left ~"
         if not unknown:
-            return f"all runs left ~{fmt_seconds(total)}"
+            return head + fmt_seconds(total)
         if total <= 0:
-            return "all runs left ~?"
-        return f"all runs left ~{fmt_seconds(total)}" + "".join(
+            return head + "?"
+        return head + fmt_seconds(total) + "".join(
             f" + {n} {b} run{'s' if n > 1 else ''}" for b, n in unknown.items())
 
     def reporter(self, key) -> ProgressReporter:
@@ -413,10 +433,12 @@ class SweepProgress(Line):
         self.running_text = ""
         super().__init__(todo, stream, tty, width, interval, tty_interval=1.0)
 
-    def layout(self) -> tuple:
+    def layout(self, short: bool = False) -> tuple:
+        """Cases done, elapsed, time left and the running cases; closed, the time taken."""
         head = "sweep {name}: {done}/{cases_total} cases done"
-        tail = ", elapsed {elapsed}, left ~{remaining}{running}"
-        return head + (" in {elapsed}" if self.disable else tail), {"name": self.name, "done": self.done0 + self.count,
+        tail = (" in {elapsed}" if self.disable
+                else ", elapsed {elapsed}, left ~{remaining}{running}")
+        return head + tail, {"name": self.name, "done": self.done0 + self.count,
                              "cases_total": self.cases_total, "running": self.running_text}
 
     def _running(self, running):
