@@ -75,7 +75,7 @@ class Line(tqdm):
     too long, its ``{bar}`` of ``BAR`` characters is shortened (to ``BAR_MIN``), then its
     ``short`` layout used, then the end of its label (the role's details) cut, and tqdm cuts
     what is still too long.  Elsewhere (``tty``: say which) each draw is a whole line.
-    :attr:`shown`: drawn at least once."""
+    ``shown``: drawn at least once."""
 
     monitor_interval = 0  # no tqdm thread redrawing a stalled bar
 
@@ -99,6 +99,7 @@ class Line(tqdm):
 
     @property
     def format_dict(self):
+        """tqdm's fields and :meth:`layout`'s, fitted to a terminal's width."""
         d = super().format_dict
         room = d["ncols"] if self.tty and (d["ncols"] or 0) > 0 else None  # a log's lines
         d["ncols"] = room  # are whole; so are those of a pseudo-terminal without a size
@@ -119,6 +120,7 @@ class Line(tqdm):
         return d
 
     def display(self, msg=None, pos=None):
+        """Draw the line (tqdm's), or ``msg``; elsewhere than a terminal, as a whole line."""
         self.shown = self.shown or msg != ""
         if self.tty:
             if self.nrows is not None and self.nrows < 1:  # a pseudo-terminal without a size:
@@ -131,10 +133,12 @@ class Line(tqdm):
         return True
 
     def clear(self, nolock=False):
+        """Clear a terminal's line (tqdm's); nothing elsewhere."""
         if self.tty:
             super().clear(nolock)
 
     def close(self):
+        """The last draw (tqdm's); elsewhere than a terminal a whole line, if any was shown."""
         if self.tty or self.disable:
             return super().close()
         self.leave = False  # the last line, whole: tqdm's would end with a second newline
