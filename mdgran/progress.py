@@ -422,8 +422,7 @@ class SweepProgress(Line):
     (tqdm's, at the mean rate) assumes cases cost alike and the workers stay busy.  On a
     terminal the line is redrawn in place at most every ``interval`` (default 1 s) and when a
     case ends; elsewhere a line when it starts, when a case ends and, between, at most every
-    ``interval`` (default 15 s) of silence; closed (:meth:`finish`), the cases done and the
-    time taken."""
+    ``interval`` (default 15 s) of silence; closed, the cases done and the time taken."""
 
     SHOW = 4  # running cases named on a line
 
@@ -479,7 +478,7 @@ class SweepProgress(Line):
         return self.count + sum(fracs)
 
     def case_done(self, case: dict, summary: dict, running=None):
-        """A case is recorded: the line now (after the last case, :meth:`finish`'s)."""
+        """A case is recorded: the line now (after the last case, the closing one)."""
         self.count += 1
         self.finished.add(case["index"])
         st = str(summary.get("status", ""))
@@ -493,7 +492,3 @@ class SweepProgress(Line):
     def tick(self, running=None):
         """The line, if ``interval`` has passed since the last."""
         self.move_to(self._look(running))
-
-    def finish(self):
-        """The last line: the cases done and the time taken."""
-        self.close()

@@ -789,7 +789,7 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
                                    tick if status is not None else None, tick_every)
         finally:
             if status is not None:
-                status.finish()
+                status.close()
             for stale in (out / "cases").glob("*.progress"):
                 stale.unlink(missing_ok=True)
             if not mpi:  # the workers are stopped: what they were writing goes
