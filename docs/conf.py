@@ -72,9 +72,9 @@ nitpick_ignore = [
     ("py:class", "x_stored"),  # Run's "Attributes:"
     ("py:attr", "Scene.sources"),  # Scene's docstring
     ("py:meth", "force"),  # ContactTable's methods mirror ContactLaw's
-    ("py:meth", "draw"),  # progress.Terminal
     ("py:data", "LEDGER_NAMES"),  # run_record's ledger terms, listed in Run's docstring
     ("py:func", "_derive_beads"), ("py:func", "run_segments"),  # private; a compiled kernel
+    ("py:class", "tqdm.std.tqdm"),  # progress.Line's base class, a library's (no intersphinx)
 ]  # a class's "Attributes:" as fields, not as a second description
 
 # ``mdgran.run`` and friends are documented where they are defined (``mdgran.api.run``); a

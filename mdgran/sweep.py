@@ -754,13 +754,13 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
     fn = case_fn or run_case
     mpi = executor == "mpi"
     status = None
-    if progress:
+    if progress and todo:  # its line starts at once
         from .progress import SweepProgress
 
         status = SweepProgress(sweep["name"], total, done0, len(todo), out / "cases", stream,
                                progress_interval)
     # workers rewrite their case's progress file at most this often (the main process reads it)
-    every = max(0.1, min(2.0, status.interval / 2)) if status is not None else None
+    every = max(0.1, min(2.0, status.mininterval / 2)) if status is not None else None
 
     def args_of(c):
         return (sweep["scene"], sweep["backend"], c, str(out), mpi, every,
@@ -778,7 +778,7 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
         status.tick(indices)
 
     if todo:
-        tick_every = min(1.0, status.interval) if status is not None else 1.0
+        tick_every = min(1.0, status.mininterval) if status is not None else 1.0
         try:
             with interrupting():
                 if mpi:
@@ -789,7 +789,7 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
                                    tick if status is not None else None, tick_every)
         finally:
             if status is not None:
-                status.finish()
+                status.close()
             for stale in (out / "cases").glob("*.progress"):
                 stale.unlink(missing_ok=True)
             if not mpi:  # the workers are stopped: what they were writing goes

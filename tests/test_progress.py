@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from mdgran.progress import (CompileNotice, ProgressReporter, RunSeries, Terminal,
-                             fmt_seconds)
+from mdgran.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 
@@ -52,7 +51,7 @@ def test_screen_emulation_catches_leftovers():
 
 def test_fmt_seconds():
     assert [fmt_seconds(s) for s in (0.04, 3.0, 42.4, 185, 3725)] == \
-        ["0s", "3s", "42s", "3m05s", "1h02m"]
+        ["00:00", "00:03", "00:42", "03:05", "1:02:05"]
     assert fmt_seconds(float("nan")) == "?"
 
 
@@ -63,11 +62,11 @@ def test_reporter_ends_at_100_percent_and_pads_over_longer_lines():
     rep = ProgressReporter(400.0, label="micro-star [reference]", delay=0.0, stream=out,
                            interval=0.0, width=200)
     rep.report_block(Frames(0.0))
-    rep.label = "micro-star [reference] with a much longer label for one draw"
+    rep.set_description_str("micro-star [reference] with a much longer label for one draw")
     rep.report_block(Frames(68.0))
-    rep.label = "micro-star [reference]"
+    rep.set_description_str("micro-star [reference]")
     rep.report_block(Frames(69.0))
-    rep.interval = 1e9  # no redraw between here and the end: the bar would stay at 17 %
+    rep.mininterval = 1e9  # no redraw between here and the end: the bar would stay at 17 %
     rep.report_block(Frames(400.0))
     rep.close("complete")
     shown = screen(out.getvalue())
@@ -81,7 +80,6 @@ def test_run_progress_ends_with_100_percent_or_the_status(tty, interrupt_at):
     out = FakeTTY() if tty else io.StringIO()
     rep = ProgressReporter(20.0, label="micro-star [reference]", delay=0.0, stream=out,
                            interval=0.01 if tty else 0.3, width=120)
-    rep.start()
     run(sc, "reference", reporters=[rep])
     lines = screen(out.getvalue())
     assert lines[-1].startswith("micro-star [reference]") and "100%" in lines[-1]
@@ -94,7 +92,6 @@ def test_run_progress_ends_with_100_percent_or_the_status(tty, interrupt_at):
     out2 = FakeTTY() if tty else io.StringIO()
     rep = ProgressReporter(20.0, label="micro-star [reference]", delay=0.0, stream=out2,
                            interval=0.0, width=120)
-    rep.start()
     with pytest.raises(KeyboardInterrupt):
         run(sc, "reference", reporters=[rep, interrupt_at(5.0)])
     last = screen(out2.getvalue())[-1]
@@ -109,14 +106,13 @@ def test_narrow_terminal_lines_fit_and_keep_their_role():
                                                      10.0)}, stream=out, interval=0.0,
                        width=72)
     rep = series.reporter(("reference", "nominal"))
-    rep.start()
     for t in (0.0, 1.0, 5.0, 10.0):
         rep.report_block(Frames(t))
     rep.close("complete")
     lines = screen(out.getvalue())
     assert len(lines) == 1 and len(lines[0]) <= 71
     assert lines[0].startswith("run 1 of 1  reference ens") and "100%" in lines[0]
-    assert Terminal(io.StringIO()).tty is False
+    assert is_tty(io.StringIO()) is False
 
 
 @pytest.mark.parametrize("tty", [False, True])
@@ -139,7 +135,7 @@ def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
         assert "100%" in mine[-1] and "done in" in mine[-1] and "all runs left" in mine[-1]
         assert len(mine) == (1 if tty else len(mine))
     last_run = [ln for ln in lines if ln.startswith("run 5 of 5")][-1]
-    assert "all runs left ~0s" in last_run
+    assert "all runs left ~00:00" in last_run
 
 
 def test_sweep_names_running_cases_while_they_run(tmp_path):
