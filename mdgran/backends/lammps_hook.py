@@ -37,8 +37,8 @@ The constants are named records (:class:`HookParams`: :class:`Chain`, :class:`Ho
 :class:`HookDrive`) and the step's arguments four more (:class:`Atoms`, :class:`Scratch`,
 :class:`Now`, the parameters), as in the fast kernel: they cross into compiled code as plain
 tuples (``fast_kernel.plain``; a named tuple costs ~2 us more per call to type) and are named again
-inside.  One step is compiled per variant (:func:`get_step`, :class:`HookFlags`): its flags
-reach the step as a tuple of literal booleans, so the branches on them fold away and the
+inside.  One step is compiled per variant (:func:`get_step`, :class:`HookFlags`): each flag
+is a constant of the variant, so numba prunes the branches on it before compiling and the
 homogeneous chain's step has none of the unlike beads' or the drive's code.
 """
 from __future__ import annotations
@@ -81,8 +81,8 @@ class HookFlags(NamedTuple):
     driven: bool  # a force pulse or a base motion (HookDrive)
 
 
-#: Index of each flag in a step's flags (``flags[MIXED]``): inside a variant they are a tuple
-#: of literal booleans (:func:`get_step`).
+#: Index of each flag in :class:`HookFlags` (``flags[MIXED]``; :func:`contact_energy` reads
+#: them at run time, the step has each as a constant of its variant, :func:`get_step`).
 WALLS, STRICT, HERTZ, TABLE, MIXED, SUB_DAMPED, DRIVEN = range(len(HookFlags._fields))
 
 
@@ -363,23 +363,23 @@ def mixed_energy(mix, hertz, jt, d):
 
 
 @njit(inline="always")
-def class_force(flags, tables, coef, laws, c, d):
+def class_force(table, hertz, tables, coef, laws, c, d):
     """Force of law class ``c`` at own-units compression ``d``: its spline (``coef[c]``,
     ``tables[c]``, indexed in place: no view of them per contact) or its exact law."""
-    if flags[TABLE]:
+    if table:
         i, x = spline_locate(d, tables[c, T_BASE], tables[c, T_SCALE], tables[c, T_TOP],
                              tables[c, T_H])
         return spline_cubic(coef[c, i, 0], coef[c, i, 1], coef[c, i, 2], coef[c, i, 3], x)
-    return exact_force(flags[HERTZ], class_law(laws, c), d)
+    return exact_force(hertz, class_law(laws, c), d)
 
 
 @njit(inline="always")
-def lost_energy(flags, params, jt, d):
+def lost_energy(mixed, hertz, params, jt, d):
     """Energy ``V(d)`` a contact (left tag ``jt``) loses on opening at compression ``d``: the
     chain's law, or the unlike contact's own (:func:`mixed_energy`)."""
-    if flags[MIXED]:
-        return mixed_energy(params.mix, flags[HERTZ], jt, d)
-    return law_energy(flags[HERTZ], params.chain.law, d)
+    if mixed:
+        return mixed_energy(params.mix, hertz, jt, d)
+    return law_energy(hertz, params.chain.law, d)
 
 
 # ---- atoms by tag ----------------------------------------------------------------------------
@@ -517,7 +517,7 @@ def _record(l, opening, delta, delta_off, energy, step, have_last, dt, dprev, ev
 
 
 @njit(inline="always")
-def _displacements(flags, a, s, now, chain):
+def _displacements(walls, a, s, now, chain):
     """Displacement ``u = x - x0`` and velocity estimate ``w = v(t + dt/2) + dt/2 a(t)`` of
     every owned and ghost atom; walls (found through ``tmap``) 0 afterwards, so that the loop
     tests nothing per atom."""
@@ -531,7 +531,7 @@ def _displacements(flags, a, s, now, chain):
         for i in range(a.nall):
             u[i] = x[i, 0] - x0[i]
             w[i] = v[i, 0]
-    if flags[WALLS]:
+    if walls:
         for t in (1, chain.ntags):
             i = find(a.tag, a.nall, s.tmap, t)
             if i >= 0:
@@ -550,21 +550,22 @@ def _switches(c, delta, delta_off, strict):
 
 
 @njit(inline="always")
-def _update_state(flags, params, now, closed, dprev, events, l, jt, own, delta, doff, nev):
+def _update_state(strict, hertz, mixed, params, a, s, now, l, jt, own, delta, doff, nev):
     """At a new step, contact ``l``'s state update (:func:`_switches`; unlike beads: strict
     where its own threshold ``doff`` is 0) and, on the owner of its left atom (``own``), its
     event (:func:`_record`, the energy lost :func:`lost_energy`) and ``dprev``.  Returns the
     number of events."""
+    closed, dprev = a.closed, a.dprev
     cl = closed[l] != 0
-    if flags[MIXED]:
+    if mixed:
         opening, closing = _switches(cl, delta, doff, doff == 0.0)
     else:
-        opening, closing = _switches(cl, delta, doff, flags[STRICT])
+        opening, closing = _switches(cl, delta, doff, strict)
     if opening or closing:
         if own:
-            e = lost_energy(flags, params, jt, delta) if opening else 0.0
+            e = lost_energy(mixed, hertz, params, jt, delta) if opening else 0.0
             nev = _record(l, opening, delta, doff, e, now.step, now.have_last,
-                          params.chain.dt, dprev, events, nev)
+                          params.chain.dt, dprev, s.events, nev)
         closed[l] = 0 if opening else 1
     if own:
         dprev[l] = delta
@@ -572,10 +573,10 @@ def _update_state(flags, params, now, closed, dprev, events, l, jt, own, delta, 
 
 
 @njit(inline="always")
-def _contact_forces(flags, a, s, now, params):
+def _contact_forces(strict, hertz, table, mixed, a, s, now, params):
     """Each listed contact: at a new step its state update (step-quantized,
     :func:`_update_state`), then its force ``f(delta) + c d(delta)/dt`` (closed) or 0 into
-    ``fcon[left atom]``; unlike beads (``flags[MIXED]``): each contact (left tag ``jt``) its
+    ``fcon[left atom]``; unlike beads (``mixed``): each contact (left tag ``jt``) its
     own threshold and law ``A f(delta / L)`` (:class:`HookMix`), its table's range checked
     in its own units (the value returned with ``BEYOND_TABLE`` is in those units).  Returns
     ``(events, sum rate^2 of owned closed contacts, error code, its local index, its
@@ -584,8 +585,8 @@ def _contact_forces(flags, a, s, now, params):
     gap, damping, delta_off, delta_max = ch.gap, ch.damping, ch.delta_off, ch.table.delta_max
     # arrays taken out of the records once: taken in the loop, for a call, the classes' ones
     # cost 27 ns per contact (42 ns per contact in all, against 15 ns)
-    tag, closed, dprev = a.tag, a.closed, a.dprev
-    u, w, fcon, pairs, events = s.u, s.w, s.fcon, s.pairs, s.events
+    tag, closed = a.tag, a.closed
+    u, w, fcon, pairs = s.u, s.w, s.fcon, s.pairs
     laws, tables, coef = mix.laws, mix.tables, mix.coef
     new_step, nown = now.new_step, now.nown
     nev = 0
@@ -598,25 +599,25 @@ def _contact_forces(flags, a, s, now, params):
         if gap != 0.0:
             delta = delta - gap
         rate = w[l] - w[r]
-        jt = tag[l] if flags[MIXED] else 0
-        doff = mix.delta_off[jt] if flags[MIXED] else delta_off
+        jt = tag[l] if mixed else 0
+        doff = mix.delta_off[jt] if mixed else delta_off
         if new_step:
-            nev = _update_state(flags, params, now, closed, dprev, events, l, jt, own, delta,
-                                doff, nev)
-        c = mix.cls[jt] if flags[MIXED] else 0
-        d = delta * mix.inv_len[jt] if flags[MIXED] else delta
-        if flags[TABLE] and d > (tables[c, T_DELTA_MAX] if flags[MIXED] else delta_max):
+            nev = _update_state(strict, hertz, mixed, params, a, s, now, l, jt, own, delta, doff,
+                                nev)
+        c = mix.cls[jt] if mixed else 0
+        d = delta * mix.inv_len[jt] if mixed else delta
+        if table and d > (tables[c, T_DELTA_MAX] if mixed else delta_max):
             return nev, rate2, BEYOND_TABLE, l, d
         F = 0.0
         if closed[l] != 0:
             if not math.isfinite(delta):
                 F = math.nan
-            elif flags[MIXED]:
-                F = mix.scale[jt] * class_force(flags, tables, coef, laws, c, d)
-            elif flags[TABLE]:
+            elif mixed:
+                F = mix.scale[jt] * class_force(table, hertz, tables, coef, laws, c, d)
+            elif table:
                 F = spline_force(ch.table, delta)
             else:
-                F = exact_force(flags[HERTZ], ch.law, delta)
+                F = exact_force(hertz, ch.law, delta)
             if damping != 0.0:
                 F = F + damping * rate
                 if own and new_step:
@@ -644,16 +645,16 @@ def drive_at(drive, t):
 
 
 @njit(inline="always")
-def _bead_forces(flags, a, s, now, params, ub, vb, fp):
+def _bead_forces(walls, mixed, sub_damped, driven, a, s, now, params, ub, vb, fp):
     """Force on owned atom ``i`` (substrate factor ``g``, :class:`HookMix`; 1 without unlike
     beads) ``F_left - F_right - g (k3 y^3 + c_s (w - u_b') + k y)`` (``y = u - u_b``; ``k``
-    the tether's stiffness; ``c_s`` with ``flags[SUB_DAMPED]``; the base ``u_b``, ``u_b'``
-    and the pulse's force ``fp`` on the atom with tag ``drive.pulse_tag`` with
-    ``flags[DRIVEN]``) into ``fext`` (y, z zeroed), and at a new step ``aprev = (F - g k1 y)
-    / m`` (the same force with ``k1`` in place of the tether's ``k``, over the bead's mass).
-    Returns ``(error code, local index, value, substrate damping power g c_s (w - u_b')^2,
-    power of the excitations F(t) w_b + u_b' sum_i F_sub,i)`` over the owned beads, with
-    ``F_sub,i = -g (k1 y + k3 y^3 + c_s (w - u_b'))``."""
+    the tether's stiffness; ``c_s`` with ``sub_damped``; the base ``u_b``, ``u_b'`` and the
+    pulse's force ``fp`` on the atom with tag ``drive.pulse_tag`` with ``driven``) into
+    ``fext`` (y, z zeroed), and at a new step ``aprev = (F - g k1 y) / m`` (the same force
+    with ``k1`` in place of the tether's ``k``, over the bead's mass).  Returns ``(error
+    code, local index, value, substrate damping power g c_s (w - u_b')^2, power of the
+    excitations F(t) w_b + u_b' sum_i F_sub,i)`` over the owned beads, with ``F_sub,i = -g
+    (k1 y + k3 y^3 + c_s (w - u_b'))``."""
     ch, mix, drive = params.chain, params.mix, params.drive
     tag, fext, aprev, u, w, fcon, left = a.tag, a.fext, a.aprev, s.u, s.w, s.fcon, s.left
     ntags, new_step = ch.ntags, now.new_step
@@ -666,10 +667,10 @@ def _bead_forces(flags, a, s, now, params, ub, vb, fp):
         t = tag[i]
         g = 0.0
         y = 0.0
-        if not (flags[WALLS] and (t == 1 or t == ntags)):
-            g = mix.on_site[t] if flags[MIXED] else 1.0
-            y = u[i] - ub if flags[DRIVEN] else u[i]
-            wv = w[i] - vb if flags[DRIVEN] else w[i]
+        if not (walls and (t == 1 or t == ntags)):
+            g = mix.on_site[t] if mixed else 1.0
+            y = u[i] - ub if driven else u[i]
+            wv = w[i] - vb if driven else w[i]
             fl = fcon[left[i]] if left[i] >= 0 else 0.0
             ext = (0.0 - fcon[i]) + fl
             fsub = 0.0
@@ -677,13 +678,13 @@ def _bead_forces(flags, a, s, now, params, ub, vb, fp):
                 c3 = g * (k3 * math.pow(y, 3.0))
                 ext = ext - c3
                 fsub = fsub - c3
-            if flags[SUB_DAMPED]:
+            if sub_damped:
                 cd = g * (cs * wv)
                 ext = ext - cd
                 fsub = fsub - cd
                 if new_step:
                     power += g * (cs * wv * wv)
-            if flags[DRIVEN]:
+            if driven:
                 if t == drive.pulse_tag:
                     ext = ext + fp
                     if new_step:
@@ -697,52 +698,27 @@ def _bead_forces(flags, a, s, now, params, ub, vb, fp):
         fext[i, 2] = 0.0
         if new_step:
             acc = ext - g * (k1 * y) if k1 != 0.0 else ext
-            aprev[i] = acc * mix.inv_mass[t] if flags[MIXED] else acc
-    return OK, -1, 0.0, power, work + vb * sub_sum if flags[DRIVEN] else 0.0
-
-
-@njit(inline="always")
-def step_forces(flags, a, s, now, params):
-    """Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column;
-    y, z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
-    events: the displacements (:func:`_displacements`), the contacts
-    (:func:`_contact_forces`), the beads (:func:`_bead_forces`, with the excitations at the
-    time LAMMPS's velocity Verlet evaluates this step's forces, the end of its position update
-    ``t = step dt``).  Returns ``(number of events, damping power c sum rate^2 over this
-    rank's contacts plus the substrate's, power of the excitations over this rank's beads,
-    error code, its local index, its value)``.
-
-    Three passes, each a function the compiler inlines (``inline="always"``): a call it does
-    not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
-    per contact, three times the contact's own work; only an event calls out
-    (:func:`_record`)."""
-    _displacements(flags, a, s, now, params.chain)
-    nev, rate2, code, where, value = _contact_forces(flags, a, s, now, params)
-    if code != OK:
-        return nev, rate2, 0.0, code, where, value
-    ub, vb, fp = 0.0, 0.0, 0.0
-    if flags[DRIVEN]:
-        ub, vb, fp = drive_at(params.drive, now.step * params.chain.dt)
-    code, where, value, sub_power, ext_power = _bead_forces(flags, a, s, now, params, ub, vb,
-                                                            fp)
-    damping = params.chain.damping
-    power = damping * rate2 if damping != 0.0 else 0.0
-    if flags[SUB_DAMPED]:
-        power = power + sub_power
-    if code != OK:
-        return nev, rate2, 0.0, code, where, value
-    return nev, power, ext_power, OK, -1, 0.0
+            aprev[i] = acc * mix.inv_mass[t] if mixed else acc
+    return OK, -1, 0.0, power, work + vb * sub_sum if driven else 0.0
 
 
 _STEPS: dict = {}
 
 
 def get_step(flags: HookFlags):
-    """The compiled step of one variant (compiled on first use, then cached on disk by numba),
-    ``step(atoms, scratch, now, params) -> (number of events, damping power, power of the
-    excitations, error code, its local index, its value)`` (:func:`step_forces`), the records
-    as plain tuples (``fast_kernel.plain``); ``tmap``, ``pairs[:npair]``, ``left`` and the
-    zeros of ``fcon`` are those :func:`contact_list` made for the current atoms."""
+    """The compiled step of one variant (:class:`HookFlags`; compiled on first use, then cached
+    on disk by numba), ``step(atoms, scratch, now, params) -> (number of events, damping power,
+    power of the excitations, error code, its local index, its value)``, the records as plain
+    tuples (``fast_kernel.plain``).
+
+    Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column; y,
+    z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
+    events: the displacements (:func:`_displacements`), the contacts
+    (:func:`_contact_forces`), the beads (:func:`_bead_forces`, with the excitations at the
+    time LAMMPS's velocity Verlet evaluates this step's forces, the end of its position update
+    ``t = step dt``); the damping power is ``c sum rate^2`` over this rank's contacts plus the
+    substrate's, the excitations' over its beads.  ``tmap``, ``pairs[:npair]``, ``left`` and
+    the zeros of ``fcon`` are those :func:`contact_list` made for the current atoms."""
     flags = HookFlags(*(bool(f) for f in flags))
     if flags not in _STEPS:
         _STEPS[flags] = _make_step(flags)
@@ -750,13 +726,40 @@ def get_step(flags: HookFlags):
 
 
 def _make_step(flags):
-    literal = tuple(flags)  # typed as literal booleans: the branches on them fold away
+    """:func:`get_step`'s step.  Each flag is a constant of the closure: numba prunes the
+    branches on it before typing (a flag taken out of a tuple, ``flags[MIXED]``, it does not:
+    every branch was compiled, and the homogeneous step took 5.3 s to compile instead of 2).
+    The three passes are functions the compiler inlines (``inline="always"``): a call it does
+    not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
+    per contact, three times the contact's own work; only an event calls out
+    (:func:`_record`).  The step's body is the closure's own: numba copies an inlined
+    function's IR block by block, each copy with all its variables, and inlining the whole
+    step into the closure took 2 s of its compile.  It allocates nothing and the caller holds
+    every array for the call, so it runs without numba's reference counting (``_nrt=False``,
+    as the fast kernel's loop)."""
+    walls, strict, hertz, table, mixed, sub_damped, driven = flags
     tag = "".join("1" if f else "0" for f in flags)  # the variant's own name (variant_jit)
 
-    @variant_jit(tag, cache=True)
+    @variant_jit(tag, cache=True, _nrt=False)
     def contact_step(atoms, scratch, now, params):
-        return step_forces(literal, Atoms(*atoms), Scratch(*scratch), Now(*now),
-                           named_params(params))
+        a, s, n, p = Atoms(*atoms), Scratch(*scratch), Now(*now), named_params(params)
+        _displacements(walls, a, s, n, p.chain)
+        nev, rate2, code, where, value = _contact_forces(strict, hertz, table, mixed, a, s, n,
+                                                         p)
+        if code != OK:
+            return nev, rate2, 0.0, code, where, value
+        ub, vb, fp = 0.0, 0.0, 0.0
+        if driven:
+            ub, vb, fp = drive_at(p.drive, n.step * p.chain.dt)
+        code, where, value, sub_power, ext_power = _bead_forces(
+            walls, mixed, sub_damped, driven, a, s, n, p, ub, vb, fp)
+        damping = p.chain.damping
+        power = damping * rate2 if damping != 0.0 else 0.0
+        if sub_damped:
+            power = power + sub_power
+        if code != OK:
+            return nev, rate2, 0.0, code, where, value
+        return nev, power, ext_power, OK, -1, 0.0
 
     return contact_step
 
