@@ -387,8 +387,8 @@ class LammpsBackend(Backend):
         ex("d_dprev", nelem=n)[:] = 0.0
         ex("d_aprev", nelem=n)[:] = 0.0
         self._kernel = lammps_hook
-        self._flags = lammps_hook.hook_flags(self.model, self.law, self.table)
         params = lammps_hook.hook_parameters(self.model, self.law, self.table, self.dt, tether)
+        self._flags = params.flags
         self._ntags = params.chain.ntags
         self._params = plain(params)  # crosses into compiled code as plain tuples
         self._step = lammps_hook.get_step(self._flags)
@@ -507,7 +507,7 @@ class LammpsBackend(Backend):
             f[:, :] = 0.0
         if step % self._thermo_every == 0:  # contact energy for thermo (pe, f_contact)
             e = 0.0 if self._error is not None else kernel.contact_energy(
-                tuple(self._flags), atoms, self._scratch, self._params)
+                atoms, self._scratch, self._params)
             if self._mpi is not None:
                 e = self._mpi.allreduce(e)
             self.lmp.fix_external_set_energy_global("contact", e)

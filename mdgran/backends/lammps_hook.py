@@ -37,9 +37,10 @@ The constants are named records (:class:`HookParams`: :class:`Chain`, :class:`Ho
 :class:`HookDrive`) and the step's arguments four more (:class:`Atoms`, :class:`Scratch`,
 :class:`Now`, the parameters), as in the fast kernel: they cross into compiled code as plain
 tuples (``fast_kernel.plain``; a named tuple costs ~2 us more per call to type) and are named again
-inside.  One step is compiled per variant (:func:`get_step`, :class:`HookFlags`): each flag
-is a constant of the variant, so numba prunes the branches on it before compiling and the
-homogeneous chain's step has none of the unlike beads' or the drive's code.
+inside.  One step is compiled per variant (:func:`get_step`, :data:`VARIANT_FLAGS`): each of
+its flags is a constant of the variant, so numba prunes the branches on it before compiling
+and the homogeneous chain's step has none of the table's or the exact law's, the unlike
+beads' or the drive's code the other variants have.
 """
 from __future__ import annotations
 
@@ -70,7 +71,8 @@ def tether_stiffness(k1) -> float:
 
 # ---- the records -----------------------------------------------------------------------------
 class HookFlags(NamedTuple):
-    """Which terms a compiled step has (compile-time constants of :func:`get_step`)."""
+    """Which terms a run's step has (:func:`get_step` compiles a step per its
+    :data:`VARIANT_FLAGS`; the step reads the others at run time)."""
 
     walls: bool  # a fixed wall atom at each end (tags 1 and ntags)
     strict: bool  # delta_off = 0 (DMT, Hertz): strict inequalities in the switching
@@ -81,9 +83,10 @@ class HookFlags(NamedTuple):
     driven: bool  # a force pulse or a base motion (HookDrive)
 
 
-#: Index of each flag in :class:`HookFlags` (``flags[MIXED]``; :func:`contact_energy` reads
-#: them at run time, the step has each as a constant of its variant, :func:`get_step`).
-WALLS, STRICT, HERTZ, TABLE, MIXED, SUB_DAMPED, DRIVEN = range(len(HookFlags._fields))
+#: The flags a step is compiled for (:func:`get_step`): each selects code of its own.  The
+#: others (a test, or which law function is called) the step reads at run time from
+#: ``HookParams.flags``, so that chains differing only in them share a compiled step.
+VARIANT_FLAGS = ("table", "mixed", "sub_damped", "driven")
 
 
 class HookTable(NamedTuple):
@@ -161,11 +164,13 @@ class HookDrive(NamedTuple):
 
 
 class HookParams(NamedTuple):
-    """Everything constant of a run: the chain, its unlike beads, its excitations."""
+    """Everything constant of a run: the chain, its unlike beads, its excitations, its
+    flags."""
 
     chain: Chain
     mix: HookMix
     drive: HookDrive
+    flags: HookFlags
 
 
 class Atoms(NamedTuple):
@@ -308,7 +313,8 @@ def hook_parameters(model, law, table, dt, tether=False) -> HookParams:
     unlike beads gets a table of as many nodes)."""
     points = table.n if table is not None else None
     return HookParams(chain_constants(model, law, table, dt, tether),
-                      mix_parameters(model, points), drive_parameters(model))
+                      mix_parameters(model, points), drive_parameters(model),
+                      hook_flags(model, law, table))
 
 
 @njit(inline="always")
@@ -317,7 +323,7 @@ def named_params(p):
     c = p[0]
     return HookParams(Chain(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
                             SchwarzConstants(*c[8]), HookTable(*c[9])),
-                      HookMix(*p[1]), HookDrive(*p[2]))
+                      HookMix(*p[1]), HookDrive(*p[2]), HookFlags(*p[3]))
 
 
 # ---- the law ---------------------------------------------------------------------------------
@@ -706,10 +712,10 @@ _STEPS: dict = {}
 
 
 def get_step(flags: HookFlags):
-    """The compiled step of one variant (:class:`HookFlags`; compiled on first use, then cached
-    on disk by numba), ``step(atoms, scratch, now, params) -> (number of events, damping power,
-    power of the excitations, error code, its local index, its value)``, the records as plain
-    tuples (``fast_kernel.plain``).
+    """The compiled step of the variant of ``flags`` (its :data:`VARIANT_FLAGS`; compiled on
+    first use, then cached on disk by numba), ``step(atoms, scratch, now, params) -> (number
+    of events, damping power, power of the excitations, error code, its local index, its
+    value)``, the records as plain tuples (``fast_kernel.plain``).
 
     Forces of the contacts and the substrate on this rank's atoms into ``fext`` (x column; y,
     z zeroed) and, at a new step, state switches, ``aprev`` of owned atoms and this rank's
@@ -719,16 +725,17 @@ def get_step(flags: HookFlags):
     ``t = step dt``); the damping power is ``c sum rate^2`` over this rank's contacts plus the
     substrate's, the excitations' over its beads.  ``tmap``, ``pairs[:npair]``, ``left`` and
     the zeros of ``fcon`` are those :func:`contact_list` made for the current atoms."""
-    flags = HookFlags(*(bool(f) for f in flags))
-    if flags not in _STEPS:
-        _STEPS[flags] = _make_step(flags)
-    return _STEPS[flags]
+    variant = tuple(bool(getattr(flags, name)) for name in VARIANT_FLAGS)
+    if variant not in _STEPS:
+        _STEPS[variant] = _make_step(variant)
+    return _STEPS[variant]
 
 
-def _make_step(flags):
-    """:func:`get_step`'s step.  Each flag is a constant of the closure: numba prunes the
-    branches on it before typing (a flag taken out of a tuple, ``flags[MIXED]``, it does not:
-    every branch was compiled, and the homogeneous step took 5.3 s to compile instead of 2).
+def _make_step(variant):
+    """:func:`get_step`'s step.  Each flag of the variant (:data:`VARIANT_FLAGS`; the others
+    from ``HookParams.flags``) is a constant of the closure: numba prunes the branches on it
+    before typing (a flag taken out of a tuple, ``flags[k]``, it does not: every branch was
+    compiled, and the homogeneous step took 5.3 s to compile instead of 2).
     The three passes are functions the compiler inlines (``inline="always"``): a call it does
     not inline, with these arrays (numba passes each as a structure of 7 values), cost ~60 ns
     per contact, three times the contact's own work; only an event calls out
@@ -737,12 +744,13 @@ def _make_step(flags):
     step into the closure took 2 s of its compile.  It allocates nothing and the caller holds
     every array for the call, so it runs without numba's reference counting (``_nrt=False``,
     as the fast kernel's loop)."""
-    walls, strict, hertz, table, mixed, sub_damped, driven = flags
-    tag = "".join("1" if f else "0" for f in flags)  # the variant's own name (variant_jit)
+    table, mixed, sub_damped, driven = variant
+    tag = "".join("1" if f else "0" for f in variant)  # the variant's own name (variant_jit)
 
     @variant_jit(tag, cache=True, _nrt=False)
     def contact_step(atoms, scratch, now, params):
         a, s, n, p = Atoms(*atoms), Scratch(*scratch), Now(*now), named_params(params)
+        walls, strict, hertz = p.flags.walls, p.flags.strict, p.flags.hertz  # at run time
         _displacements(walls, a, s, n, p.chain)
         nev, rate2, code, where, value = _contact_forces(strict, hertz, table, mixed, a, s, n,
                                                          p)
@@ -765,13 +773,13 @@ def _make_step(flags):
 
 
 @njit(cache=True)
-def contact_energy(flags, atoms, scratch, params):
+def contact_energy(atoms, scratch, params):
     """Energy ``sum V(delta)`` of the closed contacts whose left atom is owned (``u`` as left
-    by the step), the exact law (unlike beads: each contact's own); ``flags``, ``atoms``,
-    ``scratch``, ``params``: plain :class:`HookFlags` (read at run time), :class:`Atoms`,
-    :class:`Scratch`, :class:`HookParams`."""
+    by the step), the exact law (unlike beads: each contact's own); ``atoms``, ``scratch``,
+    ``params``: plain :class:`Atoms`, :class:`Scratch`, :class:`HookParams` (its flags read at
+    run time)."""
     a, s, p = Atoms(*atoms), Scratch(*scratch), named_params(params)
-    tag, ch = a.tag, p.chain
+    tag, ch, flags = a.tag, p.chain, p.flags
     e = 0.0
     for i in range(a.nlocal):
         if a.closed[i] == 0 or tag[i] >= ch.ntags:
@@ -782,8 +790,8 @@ def contact_energy(flags, atoms, scratch, params):
         delta = s.u[i] - s.u[j]
         if ch.gap != 0.0:
             delta = delta - ch.gap
-        if flags[MIXED]:
-            e += mixed_energy(p.mix, flags[HERTZ], tag[i], delta)
+        if flags.mixed:
+            e += mixed_energy(p.mix, flags.hertz, tag[i], delta)
         else:
-            e += law_energy(flags[HERTZ], ch.law, delta)
+            e += law_energy(flags.hertz, ch.law, delta)
     return e
