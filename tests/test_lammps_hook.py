@@ -27,7 +27,7 @@ import lammps_ranks_worker as worker  # noqa: E402
 MPIEXEC = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
 
 
-class _Model:  # what lammps_hook.parameters reads of a chain model
+class _Model:  # what lammps_hook.chain_constants reads of a chain model
     gap = damping = k1 = k3 = 0.0
     walls, n = True, 10
 
@@ -40,21 +40,22 @@ class _Model:  # what lammps_hook.parameters reads of a chain model
 ])
 def test_kernel_law_is_the_contact_module_bit_for_bit(law):
     """Force from the table, exact force and energy at 3000 compressions from below snap-off
-    to the table's end: the kernel's scalar functions with its packed parameters give
+    to the table's end: the kernel's scalar functions with its records of the law give
     ContactLaw's and ContactTable's values exactly, and the spline the value of numpy's
     arithmetic written out."""
     table = ContactTable(law)
-    par, ipar = kernel.parameters(_Model(), law, table, 0.01)
+    chain = kernel.chain_constants(_Model(), law, table, 0.01)
+    hertz = law.kind == "hertz"
     d = np.concatenate([np.linspace(law.delta_off - 0.5, 2.0, 2000),
                         np.geomspace(2.0, table.delta_max, 1000)])
-    spline = np.array([kernel.spline_force(table.f_coef, par, x) for x in d])
+    spline = np.array([kernel.spline_force(chain.table, x) for x in d])
     w = np.sqrt(np.maximum(d - table.base, 0.0))  # the spline in numpy, written out here
     s = np.minimum(w * table._scale, table.n - 1 - 1e-9)
     i = s.astype(np.int64)
     x, c = (s - i) * table._h, table.f_coef
     assert np.array_equal(spline, ((c[i, 0] * x + c[i, 1]) * x + c[i, 2]) * x + c[i, 3])
-    exact = np.array([kernel.exact_force(par, ipar, x) for x in d])
-    energy = np.array([kernel.law_energy(par, ipar, x) for x in d])
+    exact = np.array([kernel.exact_force(hertz, chain.law, x) for x in d])
+    energy = np.array([kernel.law_energy(hertz, chain.law, x) for x in d])
     assert np.array_equal(spline, table.force(d))
     assert np.array_equal(exact, law.force(d))
     assert np.array_equal(energy, law.energy(d))

@@ -61,8 +61,8 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   update ``t = step dt`` (located: each pass's end); the substrate acts on ``u - u_b`` and
   ``w - u_b'``, the pulse pushes its bead.  Their work ``W`` is integrated by the trapezoidal
   rule of its rate between step ends, per rank, summed like ``D_viscous``, and is each frame's
-  ``external_work``: the hook's :func:`~mdgran.backends.lammps_hook.contact_step_driven`
-  (``_account``, ``_sync_hook``), the fix's ``pulse`` and ``base`` keywords (its vector's 4th
+  ``external_work``: the hook's driven step (:func:`~mdgran.backends.lammps_hook.get_step`,
+  ``_account``, ``_sync_hook``), the fix's ``pulse`` and ``base`` keywords (its vector's 4th
   element).  Undriven scenes take none of this.
 * **Located events** (``events="located"``, the default with the native contact): the fix
   integrates the chain itself (``fix move`` and ``fix substrate`` go) and steps each event's
@@ -374,6 +374,7 @@ class LammpsBackend(Backend):
         LAMMPS copies it to ghost atoms when it builds them), the compiled kernel's parameters
         and, on several ranks, the communicator."""
         from . import lammps_hook
+        from .fast_kernel import plain
 
         tether = lmp.has_id("fix", "substrate")  # the kernel applies its force instead
         if tether:
@@ -387,15 +388,12 @@ class LammpsBackend(Backend):
         ex("d_dprev", nelem=n)[:] = 0.0
         ex("d_aprev", nelem=n)[:] = 0.0
         self._kernel = lammps_hook
-        self._par, self._ipar = lammps_hook.parameters(self.model, self.law, self.table, self.dt,
-                                                       tether)
-        points = self.table.n if self.table is not None else None
-        self._mix = lammps_hook.mix_parameters(self.model, self._ipar, self.dt, points, tether)
-        self._extended = bool(self._ipar[lammps_hook.I_MIXED] or
-                              self._ipar[lammps_hook.I_SUB_DAMPED])
-        self._drive = lammps_hook.drive_parameters(self.model)  # None: undriven
+        params = lammps_hook.hook_parameters(self.model, self.law, self.table, self.dt, tether)
+        self._flags = params.flags
+        self._ntags = params.chain.ntags
+        self._params = plain(params)  # crosses into compiled code as plain tuples
+        self._step = lammps_hook.get_step(self._flags)
         self._initial_state(lmp)
-        self._coef = self.table.f_coef if self.table is not None else np.zeros((1, 4))
         self._tmap = np.zeros(self.ntot + 2, dtype=np.int32)  # tag -> local index (checked)
         self._nmax = 0
         self._list_key = None  # (nlocal, nall, nmax, nbuild) of the kept contact list
@@ -458,6 +456,8 @@ class LammpsBackend(Backend):
             self._edge = np.empty(2 * nmax, dtype=np.int64)
             self._ev = np.empty((nmax, 4))  # pages touched only by the rows written
             self._nmax = nmax
+            self._scratch = (self._tmap, self._u, self._w, self._fcon, self._left, self._pairs,
+                             self._ev)  # lammps_hook.Scratch, plain
 
     def _callback(self, caller, step, nlocal, tag_ptr, x_ptr, f_ptr):
         """Exceptions cannot cross LAMMPS's C frames: the first one is kept and re-raised by
@@ -478,14 +478,14 @@ class LammpsBackend(Backend):
         nmax = lmp.extract_setting("nmax")
         self._buffers(nmax)
         tag, x, v, x0, closed, dprev, aprev = self._views.atoms(nmax, nall)
+        atoms = (tag, x, v, f, x0, closed, dprev, aprev, nlocal, nall)  # lammps_hook.Atoms
         new_step = step != self._last_step
         # the map and the contact list, kept while the atoms' local indices hold: until LAMMPS
         # re-neighbours (its count of neighbour-list builds, thermo keyword nbuild, moves) or
         # sets up a run (a call for the step already done; the count restarts at 0 there)
         key = (nlocal, nall, nmax, self.lmp.get_thermo("nbuild"))
         if not new_step or key != self._list_key:
-            self._list = kernel.contact_list(tag, nlocal, nall, closed, self._tmap, self._ipar,
-                                             self._left, self._fcon, self._pairs)
+            self._list = kernel.contact_list(atoms, self._scratch, self._ntags)
             self._list_key = key
         if self._mpi is not None:  # collective: every rank, every call
             self._share_aprev(tag, nlocal, nall, aprev)
@@ -495,25 +495,9 @@ class LammpsBackend(Backend):
                 if missing >= 0:
                     raise self._kernel_error(kernel.PARTNER_MISSING, int(tag[missing]), 0.0,
                                              step)
-                ext_power = 0.0
-                if self._drive is not None:  # a force pulse or a base motion
-                    nev, power, ext_power, err, where, value = kernel.contact_step_driven(
-                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
-                        self._coef, self._par, self._ipar, step, new_step,
-                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
-                        self._pairs, npair, nown, self._ev, self._mix, self._drive)
-                elif self._extended:  # unlike beads or substrate damping
-                    nev, power, err, where, value = kernel.contact_step_mixed(
-                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
-                        self._coef, self._par, self._ipar, step, new_step,
-                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
-                        self._pairs, npair, nown, self._ev, self._mix)
-                else:
-                    nev, power, err, where, value = kernel.contact_step(
-                        tag, x, v, f, nlocal, nall, x0, closed, dprev, aprev, self._tmap,
-                        self._coef, self._par, self._ipar, step, new_step,
-                        self._last_step is not None, self._u, self._w, self._fcon, self._left,
-                        self._pairs, npair, nown, self._ev)
+                now = (step, new_step, self._last_step is not None, npair, nown)  # Now
+                nev, power, ext_power, err, where, value = self._step(atoms, self._scratch, now,
+                                                                      self._params)
                 if err != kernel.OK:
                     raise self._kernel_error(err, int(tag[where]), value, step)
                 if new_step:
@@ -524,8 +508,7 @@ class LammpsBackend(Backend):
             f[:, :] = 0.0
         if step % self._thermo_every == 0:  # contact energy for thermo (pe, f_contact)
             e = 0.0 if self._error is not None else kernel.contact_energy(
-                tag, nlocal, nall, self._tmap, closed, self._u, self._par, self._ipar,
-                self._mix)
+                atoms, self._scratch, self._params)
             if self._mpi is not None:
                 e = self._mpi.allreduce(e)
             self.lmp.fix_external_set_energy_global("contact", e)
@@ -579,7 +562,7 @@ class LammpsBackend(Backend):
                 self.d_visc += dv
             else:
                 self._part[1] += dv
-            if self._drive is not None:
+            if self._flags.driven:
                 dw = 0.5 * (ext_power + self._work_prev) * self.dt
                 if self._mpi is None:
                     self.work += dw

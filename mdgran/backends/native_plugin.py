@@ -172,14 +172,12 @@ def write_mixture(model, folder, points=None) -> Path:
     substrate factor ``g`` and the scales ``A``, ``1/L``, ``L``, threshold ``L delta_off`` and
     law class of the contact to its right (:class:`mdgran.backends.lammps_hook.HookMix`, the
     very numbers the hook uses); each class's ``fc``.  Numbers as ``repr`` (exact)."""
-    import numpy as np
-
     from ..contact import ContactTable
-    from .lammps_hook import NIPAR, mix_parameters
+    from .lammps_hook import mix_parameters
 
     folder = Path(folder)
     mix = model.mixture
-    hm = mix_parameters(model, np.zeros(NIPAR, dtype=np.int64), 1.0)
+    hm = mix_parameters(model)
     lines = ["# mdgran unlike beads", "MDGRAN_MIXTURE", f"ntags {len(hm.inv_mass) - 1}",
              f"classes {len(mix.laws)}"]
     for k, law in enumerate(mix.laws):
