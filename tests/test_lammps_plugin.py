@@ -185,12 +185,19 @@ def test_no_compiler_means_one_line(monkeypatch, tmp_path):
 def test_plugin_for_another_lammps_is_rebuilt(plugin, monkeypatch, tmp_path):
     """LAMMPS loads a plugin built for another version with a mere note: mdgran checks the
     version recorded at build time and builds one for the running LAMMPS in the user cache."""
-    src = tmp_path / "src"
-    shutil.copytree(native_plugin.SOURCE_DIR, src)
-    info = src / native_plugin.INFO
-    info.write_text(info.read_text().replace(native_plugin.lammps_dist_version(), "2023.8.2.3.0"))
+    import json
+
+    src = tmp_path / "src"  # the sources with a plugin beside them, built for another LAMMPS
+    shutil.copytree(native_plugin.SOURCE_DIR, src,
+                    ignore=shutil.ignore_patterns(native_plugin.PLUGIN, native_plugin.INFO))
+    shutil.copy(plugin, src / native_plugin.PLUGIN)
     monkeypatch.setattr(native_plugin, "SOURCE_DIR", src)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    built_for = {"lammps": native_plugin.lammps_dist_version(),
+                 "sources": native_plugin.source_hash()}
+    (src / native_plugin.INFO).write_text(json.dumps(built_for))
+    assert native_plugin.plugin_path() == src / native_plugin.PLUGIN  # this LAMMPS's: taken
+    (src / native_plugin.INFO).write_text(json.dumps({**built_for, "lammps": "2023.8.2.3.0"}))
     path = native_plugin.plugin_path()
     assert path.parent == native_plugin.cache_dir(native_plugin.lammps_dist_version())
     assert native_plugin.plugin_path() == path  # built once
