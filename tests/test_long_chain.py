@@ -89,3 +89,8 @@ def test_the_native_fix_carries_the_same_pulse(plugin):
     bad = dict(check, agree=False)
     study = {"runs": [], "converged_peak_v": {}, "duration": 20.0, "cross_check": bad}
     assert any("DISAGREES" in line for line in long_chain_markdown(study))
+    # ranks that stop without measures (a chain of no beads is refused on every rank) are a
+    # check that failed, not one that could not run
+    failed = compare_backends(fast, 0, 20.0, "lammps:native", ranks=2)
+    assert "unavailable" not in failed and not failed["agree"]
+    assert failed["status"].startswith("failed: 2 ranks exited"), failed["status"]
