@@ -251,9 +251,16 @@ def schwarz_mean_force(delta0, delta1, law):
     Gauss-Legendre is exact, with no cancellation when ``delta1 - delta0`` is small.  Where the
     weights vanish (both ends at ``t_min``) it is ``f(t0)``.
     """
-    sg, tm, fc = law.sigma, law.t_min, law.fc
-    t0 = branch_t(delta0, sg, tm, law.delta_min)
-    t1 = branch_t(delta1, sg, tm, law.delta_min)
+    t0 = branch_t(delta0, law.sigma, law.t_min, law.delta_min)
+    t1 = branch_t(delta1, law.sigma, law.t_min, law.delta_min)
+    return schwarz_mean_force_of_branch(t0, t1, law)
+
+
+@njit(cache=True)
+def schwarz_mean_force_of_branch(t0, t1, law):
+    """:func:`schwarz_mean_force` from the branch parameters ``t0``, ``t1`` of the interval's
+    ends (:func:`branch_t`)."""
+    sg, fc = law.sigma, law.fc
     mid, half = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
     num = 0.0
     den = 0.0

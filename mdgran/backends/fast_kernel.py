@@ -96,7 +96,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ..contact_scalar import (SchwarzConstants, law_energy, law_force, schwarz_mean_force,
+from ..contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
+                              schwarz_mean_force, schwarz_mean_force_of_branch,
                               spline_cubic)
 
 # status codes (counters.status)
@@ -300,6 +301,8 @@ class Segments(NamedTuple):
     ev_contact: np.ndarray  # [m] int64 its contact
     kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
     #                     s * size + k (:func:`apply_kicks`)
+    branch: np.ndarray  # [m, 2] contact j's last branch inversion (u, branch_t(u)); NaN: none
+    #                     (:func:`memo_mean_force`)
 
 
 class KernelState(NamedTuple):
@@ -385,7 +388,8 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
     count = max(1, -(-n_contacts // size))
     return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
                     np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
-                    np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64))
+                    np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64),
+                    np.full((n_contacts, 2), np.nan))
 
 
 def new_state(n: int, n_contacts: int, event_capacity: int,
@@ -562,6 +566,34 @@ def mean_force_at(flags, params, j, d0, d1):
 
 
 @njit(inline="always")
+def memo_branch(memo, j, u, law):
+    """``branch_t(u)`` of contact j's law, taken from ``memo[j]`` when it holds u (the same
+    number: the inversion is a function of u alone)."""
+    if memo[j, 0] == u:
+        return memo[j, 1]
+    return branch_t(u, law.sigma, law.t_min, law.delta_min)
+
+
+@njit(inline="always")
+def memo_mean_force(flags, params, j, d0, d1, memo):
+    """:func:`mean_force_at` of contact j over [d0, d1], bit for bit, its start's branch
+    inversion (seven Newton steps) taken from ``memo`` when the last one of contact j was
+    there: a kicked contact's end of one step is its start of the next.  Its end's goes into
+    ``memo[j]``.  A contact's memo is read and written by the one segment that owns it."""
+    law, u0, u1, scale = params.law, d0, d1, 1.0
+    if flags[MIXED]:
+        k = params.mix.kind[j]
+        il = pair_at(params, k, P_INV_LEN)
+        law, u0, u1, scale = class_law(params.mix, k), d0 * il, d1 * il, pair_at(params, k,
+                                                                                  P_SCALE)
+    t0 = memo_branch(memo, j, u0, law)
+    t1 = branch_t(u1, law.sigma, law.t_min, law.delta_min)
+    memo[j, 0], memo[j, 1] = u1, t1
+    f = schwarz_mean_force_of_branch(t0, t1, law)
+    return scale * f if flags[MIXED] else f
+
+
+@njit(inline="always")
 def bead_factors(flags, params, i):
     """(1 / m, substrate factor) of bead i: (1, 1) in a homogeneous chain."""
     if flags[MIXED]:
@@ -713,10 +745,10 @@ def predicted(old, b, h):
 
 
 @njit(cache=True)
-def pass_force(flags, params, old, closed, h, j):
+def pass_force(flags, params, old, closed, h, j, memo):
     """``(F, Fv)`` of contact j at the end of the pass of length h from ``old`` (the force,
     and the force the beads' velocity kick uses: :func:`segment_pass`'s ``f`` and ``fv``),
-    by the pass's operations."""
+    by the pass's operations (``memo``: :func:`memo_mean_force`)."""
     walls = flags[WALLS]
     n = old.x.shape[0]
     rshift = 0 if walls else 1
@@ -734,7 +766,8 @@ def pass_force(flags, params, old, closed, h, j):
     fv = f
     if in_kick_band(flags, params, j, d):
         d0 = across(walls, old.x, j) - params.gap
-        fv = 2.0 * mean_force_at(flags, params, j, d0, d) - force_at(flags, params, j, d0)[0]
+        fv = 2.0 * memo_mean_force(flags, params, j, d0, d, memo) - force_at(flags, params,
+                                                                             j, d0)[0]
     if flags[DAMPED]:
         f += params.damping * r
         fv += params.damping * r
@@ -742,29 +775,33 @@ def pass_force(flags, params, old, closed, h, j):
 
 
 @njit(cache=True)
-def refinish(flags, params, old, vn, closed, h, now, b):
-    """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces of its two
-    contacts (:func:`pass_force`), by the pass's operations."""
-    rshift = 0 if flags[WALLS] else 1
-    jl, jr = b - rshift, b - rshift + 1
-    fv_l = pass_force(flags, params, old, closed, h, jl)[1] if jl >= 0 else 0.0
-    fv_r = pass_force(flags, params, old, closed, h, jr)[1] if jr < closed.shape[0] else 0.0
+def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
+    """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces ``fv_l`` and
+    ``fv_r`` of its left and right contacts (:func:`pass_force`), by the pass's operations."""
     x, vh, ve = predicted(old, b, h)
     im, g = bead_factors(flags, params, b)
     av = bead_accelerations(0.0, fv_l - fv_r, x, ve, im, g, flags, params, now)[1]
     vn[b] = vh + 0.5 * h * av
 
 
+@njit(inline="always")
+def kick_of(flags, params, old, closed, h, j, m, memo):
+    """``Fv`` of contact j (:func:`pass_force`); 0 beyond the chain's m contacts."""
+    return pass_force(flags, params, old, closed, h, j, memo)[1] if 0 <= j < m else 0.0
+
+
 @njit(cache=True)
 def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, row, j0, j1, count, fv_first,
-                fv_last):
+                fv_last, memo):
     """The mean-force kicks of a segment's contacts ``kicked[row: row + count]`` (in the band
-    near snap-off; its pass ran contacts j0 .. j1 - 1), after its pass: the velocities of
-    the beads next to them that the pass finished, redone with each contact's ``Fv``
-    (:func:`pass_force`) by the pass's operations, and the pass's first and last ``Fv``;
-    returns those two.  Out of the pass's loop, whose registers a call inside it cost 20-30 %
-    on a chain of unlike beads."""
-    n = old.x.shape[0]
+    near snap-off, in order along the chain; its pass ran contacts j0 .. j1 - 1), after its
+    pass: the velocities of the beads next to them that the pass finished, redone with each
+    contact's ``Fv`` (:func:`pass_force`) by the pass's operations, and the pass's first and
+    last ``Fv``; returns those two.  Each kicked contact's ``Fv`` (a mean force: two branch
+    inversions) is computed once and each bead redone once, however the kicked contacts
+    neighbour each other.  Out of the pass's loop, whose registers a call inside it cost
+    20-30 % on a chain of unlike beads."""
+    n, m = old.x.shape[0], closed.shape[0]
     rshift = 0 if flags[WALLS] else 1
     now = drive_at(flags, params, t0 + h)
     # the beads this pass finished: the left bead of each of its contacts but the first's when
@@ -772,15 +809,25 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, row, j0, j1, coun
     # finished after it
     lo = max(j0 + rshift - (0 if j0 > 0 else 1), 0)
     hi = min(j1 + rshift - 2, n - 1)
+    prev, fv_prev = -2, 0.0  # the last kicked contact and its Fv
     for k in range(count):
         j = kicked[row + k]
+        fv = kick_of(flags, params, old, closed, h, j, m, memo)
         if j == j0:
-            fv_first = pass_force(flags, params, old, closed, h, j)[1]
+            fv_first = fv
         if j == j1 - 1:
-            fv_last = pass_force(flags, params, old, closed, h, j)[1]
-        for b in (j + rshift - 1, j + rshift):
-            if lo <= b <= hi:
-                refinish(flags, params, old, vn, closed, h, now, b)
+            fv_last = fv
+        b = j + rshift - 1  # the bead left of contact j (right of contact j - 1)
+        if lo <= b <= hi:
+            fv_left = fv_prev if prev == j - 1 else kick_of(flags, params, old, closed, h,
+                                                              j - 1, m, memo)
+            refinish(flags, params, old, vn, h, now, b, fv_left, fv)
+        b += 1  # the bead right of contact j: now, unless contact j + 1 is kicked next
+        nxt = kicked[row + k + 1] if k + 1 < count else -1
+        if lo <= b <= hi and nxt != j + 1:
+            refinish(flags, params, old, vn, h, now, b, fv,
+                     kick_of(flags, params, old, closed, h, j + 1, m, memo))
+        prev, fv_prev = j, fv
     return fv_first, fv_last
 
 
@@ -797,8 +844,8 @@ def quantized_due(closed, d, delta_off):
 @njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
-    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, jlo,
-    jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, branch,
+    jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
     front being at rest, :func:`step_range`): returns
     its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
     first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
@@ -819,7 +866,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    h, t0, size, flag, ev_real, ev_contact, kicked, jlo, jhi = seg
+    h, t0, size, flag, ev_real, ev_contact, kicked, branch, jlo, jhi = seg
     walls = flags[WALLS]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
@@ -865,25 +912,25 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
                 flags, params, j, d, doff, xo, h, t0, closed)
             nev += 1
-        f_r, fv_r = 0.0, 0.0
-        if closed[j]:
-            f_r, ok = force_at(flags, params, j, d)
-            if not ok:
-                status, bad = OUT_OF_TABLE, np.int64(j)
-            fv_r = f_r
-            # near snap-off: the mean-force kick, after the loop (apply_kicks)
-            if in_kick_band(flags, params, j, d):
-                kicked[row + np.uint64(nkick)] = np.int64(j)
-                nkick += 1
-            if flags[DAMPED]:
-                f_r += c * r
-                fv_r += c * r
-                power += c * r * r
-            g = d - doff
-            gd = r
-        else:
-            g = -d
-            gd = -r
+        # closed or open as selects, not branches: in an active chain contacts are closed
+        # and open at random along it, and a branch on it is mispredicted half the time
+        # (the force of an open contact, computed and dropped, is finite: the table's at 0)
+        cl = closed[j]
+        f, ok = force_at(flags, params, j, d)
+        if cl and not ok:
+            status, bad = OUT_OF_TABLE, np.int64(j)
+        if flags[DAMPED]:
+            cr = c * r if cl else 0.0
+            f += cr
+            power += cr * r
+        f_r = f if cl else 0.0
+        fv_r = f_r
+        # near snap-off: the mean-force kick, after the loop (apply_kicks)
+        if cl and in_kick_band(flags, params, j, d):
+            kicked[row + np.uint64(nkick)] = np.int64(j)
+            nkick += 1
+        g = d - doff if cl else -d
+        gd = r if cl else -r
         if flags[LOCATE]:
             # a dip of g below 0 inside the step implies g1 < h/2 g'(h) (g is a parabola)
             if g < 0.0 or g < 0.5 * h * gd:
@@ -905,7 +952,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     if nkick > 0:
         fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
                                      kicked, np.int64(row), np.int64(j0), np.int64(j1), nkick,
-                                     fv_first, fv_l)
+                                     fv_first, fv_l, branch)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
@@ -1003,7 +1050,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
-                               seg.kicked, 0, ks.closed.shape[0]), 0)
+                               seg.kicked, seg.branch, 0, ks.closed.shape[0]), 0)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
         log_switches(ks, 0)
@@ -1371,7 +1418,8 @@ def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi):
 
 
 @njit(cache=True)
-def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse, window_left):
+def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse, window_left,
+                     memo):
     """Neighbour bead b of a window after the step of length h ending at t1: its end
     acceleration and velocity from the window's end force ``f_edge`` on the contact they
     share and the pass's force on its other contact, its velocity given the difference
@@ -1384,12 +1432,13 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     im, g = bead_factors(flags, params, b)
     if window_left:  # the edge is b's left contact: +F on b
         jo = b - s + 1
-        fo, fvo = pass_force(flags, params, old, closed, h, jo) if jo < closed.shape[0] else (
-            0.0, 0.0)
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo)
+                   if jo < closed.shape[0] else (0.0, 0.0))
         f, fv, dj = f_edge - fo, f_edge - fvo, impulse
     else:  # the edge is b's right contact: -F on b
         jo = b - s
-        fo, fvo = pass_force(flags, params, old, closed, h, jo) if jo >= 0 else (0.0, 0.0)
+        fo, fvo = pass_force(flags, params, old, closed, h, jo, memo) if jo >= 0 else (0.0,
+                                                                                      0.0)
         f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
     a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
     new.x[b] = x
@@ -1488,10 +1537,10 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     t1 = t0 + dt
     if edge_l >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, lo - 1, fs_l,
-                         j_l - 0.5 * dt * (f0_l + fs_l), False)
+                         j_l - 0.5 * dt * (f0_l + fs_l), False, ks.seg.branch)
     if edge_r >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, hi + 1, fs_r,
-                         j_r - 0.5 * dt * (f0_r + fs_r), True)
+                         j_r - 0.5 * dt * (f0_r + fs_r), True, ks.seg.branch)
     return (0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass,
             work - 0.5 * dt * (e_start + e_state))
 
@@ -1860,9 +1909,10 @@ def _make_advance(flags, nrt: bool):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
-        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, jlo, jhi = seg
+        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, branch, jlo, jhi = seg
         r, i = segment_pass(literal, params, old, xn, vn, an, closed,
-                            (h, t0, size, flag, ev_real, ev_contact, kicked, jlo, jhi), s)
+                            (h, t0, size, flag, ev_real, ev_contact, kicked, branch, jlo, jhi),
+                            s)
         for k in range(5):
             real[s, k] = r[k]
         for k in range(4):
@@ -1883,14 +1933,14 @@ def _make_advance(flags, nrt: bool):
         xo, vo, ao = old
         xn, vn, an = new
         closed = ks.closed
-        size, count, real, ints, flag, ev_real, ev_contact, kicked = ks.seg
+        size, count, real, ints, flag, ev_real, ev_contact, kicked, branch = ks.seg
         jlo, jhi = ks.counters[0].pass_lo, ks.counters[0].pass_hi
         first, last = ks.counters[0].seg_first, ks.counters[0].seg_last
         if last - first + 1 < PARALLEL_SEGMENTS:  # a few: in order, no threads to wake
             for s in range(first, last + 1):
                 one_segment(params, old, xn, vn, an, closed,
-                            (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, jlo,
-                             jhi), s)
+                            (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
+                             branch, jlo, jhi), s)
             return merge_segments(literal, params, old, new, h, t0 + h, ks)
         for s in prange(first, last + 1):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
@@ -1899,8 +1949,8 @@ def _make_advance(flags, nrt: bool):
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, jlo, jhi),
-                        s)
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, branch,
+                         jlo, jhi), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
