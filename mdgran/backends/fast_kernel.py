@@ -301,6 +301,7 @@ class Segments(NamedTuple):
     ev_contact: np.ndarray  # [m] int64 its contact
     kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
     #                     s * size + k (:func:`apply_kicks`)
+    kick_fv: np.ndarray  # [m, 2] the pass's Fv of the contacts left and right of kicked[k]
     branch: np.ndarray  # [m, 2] contact j's last branch inversion (u, branch_t(u)); NaN: none
     #                     (:func:`memo_mean_force`)
 
@@ -389,7 +390,7 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
     return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
                     np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
                     np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64),
-                    np.full((n_contacts, 2), np.nan))
+                    np.zeros((n_contacts, 2)), np.full((n_contacts, 2), np.nan))
 
 
 def new_state(n: int, n_contacts: int, event_capacity: int,
@@ -784,24 +785,18 @@ def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
     vn[b] = vh + 0.5 * h * av
 
 
-@njit(inline="always")
-def kick_of(flags, params, old, closed, h, j, m, memo):
-    """``Fv`` of contact j (:func:`pass_force`); 0 beyond the chain's m contacts."""
-    return pass_force(flags, params, old, closed, h, j, memo)[1] if 0 <= j < m else 0.0
-
-
 @njit(cache=True)
-def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, row, j0, j1, count, fv_first,
-                fv_last, memo):
+def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick_fv, row, j0, j1, count,
+                fv_first, fv_last, memo):
     """The mean-force kicks of a segment's contacts ``kicked[row: row + count]`` (in the band
     near snap-off, in order along the chain; its pass ran contacts j0 .. j1 - 1), after its
     pass: the velocities of the beads next to them that the pass finished, redone with each
-    contact's ``Fv`` (:func:`pass_force`) by the pass's operations, and the pass's first and
-    last ``Fv``; returns those two.  Each kicked contact's ``Fv`` (a mean force: two branch
-    inversions) is computed once and each bead redone once, however the kicked contacts
-    neighbour each other.  Out of the pass's loop, whose registers a call inside it cost
-    20-30 % on a chain of unlike beads."""
-    n, m = old.x.shape[0], closed.shape[0]
+    contact's ``Fv`` (:func:`pass_force`) and the pass's ``Fv`` of their other contacts
+    (``kick_fv``) by the pass's operations, and the pass's first and last ``Fv``; returns
+    those two.  Each kicked contact's ``Fv`` (a mean force) is computed once and each bead
+    redone once, however the kicked contacts neighbour each other.  Out of the pass's loop,
+    whose registers a call inside it cost 20-30 % on a chain of unlike beads."""
+    n = old.x.shape[0]
     rshift = 0 if flags[WALLS] else 1
     now = drive_at(flags, params, t0 + h)
     # the beads this pass finished: the left bead of each of its contacts but the first's when
@@ -812,21 +807,18 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, row, j0, j1, coun
     prev, fv_prev = -2, 0.0  # the last kicked contact and its Fv
     for k in range(count):
         j = kicked[row + k]
-        fv = kick_of(flags, params, old, closed, h, j, m, memo)
+        fv = pass_force(flags, params, old, closed, h, j, memo)[1]
         if j == j0:
             fv_first = fv
         if j == j1 - 1:
             fv_last = fv
         b = j + rshift - 1  # the bead left of contact j (right of contact j - 1)
         if lo <= b <= hi:
-            fv_left = fv_prev if prev == j - 1 else kick_of(flags, params, old, closed, h,
-                                                              j - 1, m, memo)
+            fv_left = fv_prev if prev == j - 1 else kick_fv[row + k, 0]
             refinish(flags, params, old, vn, h, now, b, fv_left, fv)
         b += 1  # the bead right of contact j: now, unless contact j + 1 is kicked next
-        nxt = kicked[row + k + 1] if k + 1 < count else -1
-        if lo <= b <= hi and nxt != j + 1:
-            refinish(flags, params, old, vn, h, now, b, fv,
-                     kick_of(flags, params, old, closed, h, j + 1, m, memo))
+        if lo <= b <= hi and not (k + 1 < count and kicked[row + k + 1] == j + 1):
+            refinish(flags, params, old, vn, h, now, b, fv, kick_fv[row + k, 1])
         prev, fv_prev = j, fv
     return fv_first, fv_last
 
@@ -844,8 +836,8 @@ def quantized_due(closed, d, delta_off):
 @njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
-    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, branch,
-    jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv,
+    branch, jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
     front being at rest, :func:`step_range`): returns
     its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
     first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
@@ -866,7 +858,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    h, t0, size, flag, ev_real, ev_contact, kicked, branch, jlo, jhi = seg
+    h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo, jhi = seg
     walls = flags[WALLS]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
@@ -881,6 +873,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     nflag = 0
     nev = 0
     nkick = 0
+    last_kicked = n  # the last kicked contact (n: none yet)
     status = OK
     bad = 0
     power = 0.0
@@ -925,10 +918,14 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             power += cr * r
         f_r = f if cl else 0.0
         fv_r = f_r
+        if last_kicked + one == j:  # the kicked contact left: this is its right neighbour
+            kick_fv[row + np.uint64(nkick) - one, 1] = fv_r
         # near snap-off: the mean-force kick, after the loop (apply_kicks)
         if cl and in_kick_band(flags, params, j, d):
             kicked[row + np.uint64(nkick)] = np.int64(j)
+            kick_fv[row + np.uint64(nkick), 0] = fv_l
             nkick += 1
+            last_kicked = j
         g = d - doff if cl else -d
         gd = r if cl else -r
         if flags[LOCATE]:
@@ -951,8 +948,8 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         f_l, fv_l = f_r, fv_r
     if nkick > 0:
         fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
-                                     kicked, np.int64(row), np.int64(j0), np.int64(j1), nkick,
-                                     fv_first, fv_l, branch)
+                                     kicked, kick_fv, np.int64(row), np.int64(j0), np.int64(j1),
+                                     nkick, fv_first, fv_l, branch)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
@@ -1050,7 +1047,8 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
-                               seg.kicked, seg.branch, 0, ks.closed.shape[0]), 0)
+                               seg.kicked, seg.kick_fv, seg.branch, 0, ks.closed.shape[0]),
+                              0)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
         log_switches(ks, 0)
@@ -1909,10 +1907,10 @@ def _make_advance(flags, nrt: bool):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
-        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, branch, jlo, jhi = seg
+        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo, jhi = seg
         r, i = segment_pass(literal, params, old, xn, vn, an, closed,
-                            (h, t0, size, flag, ev_real, ev_contact, kicked, branch, jlo, jhi),
-                            s)
+                            (h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo,
+                             jhi), s)
         for k in range(5):
             real[s, k] = r[k]
         for k in range(4):
@@ -1933,14 +1931,14 @@ def _make_advance(flags, nrt: bool):
         xo, vo, ao = old
         xn, vn, an = new
         closed = ks.closed
-        size, count, real, ints, flag, ev_real, ev_contact, kicked, branch = ks.seg
+        size, count, real, ints, flag, ev_real, ev_contact, kicked, kick_fv, branch = ks.seg
         jlo, jhi = ks.counters[0].pass_lo, ks.counters[0].pass_hi
         first, last = ks.counters[0].seg_first, ks.counters[0].seg_last
         if last - first + 1 < PARALLEL_SEGMENTS:  # a few: in order, no threads to wake
             for s in range(first, last + 1):
                 one_segment(params, old, xn, vn, an, closed,
                             (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
-                             branch, jlo, jhi), s)
+                             kick_fv, branch, jlo, jhi), s)
             return merge_segments(literal, params, old, new, h, t0 + h, ks)
         for s in prange(first, last + 1):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
@@ -1949,8 +1947,8 @@ def _make_advance(flags, nrt: bool):
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, branch,
-                         jlo, jhi), s)
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick_fv,
+                         branch, jlo, jhi), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
