@@ -23,7 +23,8 @@ after each point says whether the two cores were idle.
 Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
 Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at
-every N; two ranks at least 1.8x one rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``).
+every N; two ranks at least 1.8x one rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``);
+a run of some backends replaces their rows there and keeps the other backends' rows.
 """
 from __future__ import annotations
 
@@ -122,7 +123,8 @@ def measure(n, temperature, backend, repeats, block_time, timeout):
     ranks = 2 if backend == "native-2" else 1
     row = {"n": n, "temperature": temperature, "backend": backend, "steps_per_block": steps,
            "repeats": repeats, "loadavg_before": os.getloadavg()}
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    # one BLAS thread: an idle OpenBLAS thread spinning after numpy's set-up is CPU time
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, __file__, "--worker", str(n), "--temperature", str(temperature),
@@ -173,6 +175,15 @@ def ratios(rows):
     return out
 
 
+def kept_rows(path, new_rows):
+    """The rows of the result file ``path`` whose backend this run did not measure (a run of
+    some backends replaces their rows and keeps the others')."""
+    if not path.exists():
+        return []
+    measured = {r["backend"] for r in new_rows}
+    return [r for r in json.loads(path.read_text())["rows"] if r["backend"] not in measured]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1e3,1e4,1e5,1e6")
@@ -199,6 +210,7 @@ def main(argv=None):
                 rows.append(row)
                 print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
                       flush=True)
+    rows = kept_rows(Path(args.out), rows) + rows
     result = {"benchmark": __doc__.splitlines()[0], "dt": DT,
               "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
               "rows": rows, "ratios": ratios(rows)}
