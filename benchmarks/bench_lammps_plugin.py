@@ -2,7 +2,7 @@
 
     python benchmarks/bench_lammps_plugin.py [--repeat 3] [--sizes 1e4,1e5,1e6]
 
-Each case sets up micro-star's physics with N beads (mdgran/lammps_inputs/chain.in, as the backend
+Each case sets up micro-star's physics with N beads (mdgran/backends/lammps/chain.in, as the backend
 does), runs ``run 0``, then times ``run STEPS`` alone (set-up and output excluded), --repeat
 times: median and spread (max - min) in ns per bead-step, for
 

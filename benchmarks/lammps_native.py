@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.lammps_env import lammps_version
+from mdgran.backends.lammps.env import lammps_version
 from mdgran.scene import load_scene
 from mdgran.simulation import run
 

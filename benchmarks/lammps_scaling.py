@@ -3,14 +3,14 @@
     python benchmarks/lammps_scaling.py                       # the whole matrix below
     python benchmarks/lammps_scaling.py --sizes 1e4 --ranks 1 --repeats 2   # a quick try
 
-Cases (micro-star's physics with N beads, mdgran/lammps_inputs/chain.in as the backend sets it up):
+Cases (micro-star's physics with N beads, mdgran/backends/lammps/chain.in as the backend sets it up):
 
 * ``none``        no contact (``unfix contact``): LAMMPS's own cost with chain.in's fix nve and
                   fix spring/self (put back where the backend took it out), the floor;
 * ``hook-before`` the numpy hook of revision ``--before`` (default a0662a2, the last with it:
                   whole-chain ghosts, every contact on every rank), run from a git worktree of
                   that revision (its own chain.in);
-* ``hook``        the compiled per-rank hook (mdgran/backends/lammps_hook.py);
+* ``hook``        the compiled per-rank hook (mdgran/backends/lammps/hook.py);
 * ``native``      ``fix mdgran/chain`` of the plugin, step-quantized events (the hook's work);
 * ``native-located`` the same fix integrating the chain itself, events located inside the step
                   (second order; replaces fix nve and fix spring/self).

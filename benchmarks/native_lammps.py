@@ -52,7 +52,7 @@ import numpy as np
 
 from mdgran.backends.base import steps_per_frame
 from mdgran.contact import FC_DMT, FC_JKR, ContactLaw
-from mdgran.lammps_env import new_lammps
+from mdgran.backends.lammps.env import new_lammps
 from mdgran.units import ALUMINA, Scales, contact_modulus
 
 #: Bead used when a scene has no [material] table (paper's micro bead).

@@ -4,8 +4,8 @@ Each law is a small pure scalar function (numba ``njit``) with its formula in it
 every user lifts these over contacts with a thin wrapper: :class:`mdgran.contact.ContactLaw`,
 :mod:`mdgran.chain` and :mod:`mdgran.mixture` through numpy ufuncs (:func:`lifted`), the fast
 kernel (:mod:`mdgran.backends.fast_kernel`) and the LAMMPS hook
-(``mdgran.backends.lammps_hook``) by calling them in their compiled loops.  The C++ fix
-(``mdgran/lammps_plugin/fix_mdgran_chain.cpp``) is the independent implementation: it keeps
+(``mdgran.backends.lammps.hook``) by calling them in their compiled loops.  The C++ fix
+(``mdgran/backends/lammps/fix/fix_mdgran_chain.cpp``) is the independent implementation: it keeps
 its own code and takes its numerical constants from ``law_constants.h``, which
 :func:`cxx_header` writes from the constants here.
 
@@ -353,7 +353,7 @@ CXX_HEADER = "law_constants.h"
 
 
 def cxx_header() -> str:
-    """The text of ``mdgran/lammps_plugin/law_constants.h``: the numerical constants above as
+    """The text of ``mdgran/backends/lammps/fix/law_constants.h``: the numerical constants above as
     C++ ``constexpr`` values (``repr`` digits: the same doubles)."""
     def arr(v):
         return "{" + ", ".join(repr(float(x)) for x in v) + "}"
@@ -381,4 +381,4 @@ def cxx_header() -> str:
 if __name__ == "__main__":
     from pathlib import Path
 
-    (Path(__file__).resolve().parent / "lammps_plugin" / CXX_HEADER).write_text(cxx_header())
+    (Path(__file__).resolve().parent / "backends" / "lammps" / "fix" / CXX_HEADER).write_text(cxx_header())

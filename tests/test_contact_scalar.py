@@ -73,7 +73,8 @@ def test_hertz_scalar_law():
 def test_cxx_constants_header_is_generated_from_the_python_constants():
     """law_constants.h, which the C++ fix includes, is cxx_header()'s text (regenerate it
     with ``python -m mdgran.contact_scalar``), and it holds the values the Python side uses."""
-    header = Path(contact_scalar.__file__).parent / "lammps_plugin" / contact_scalar.CXX_HEADER
+    header = (Path(contact_scalar.__file__).parent / "backends" / "lammps" / "fix"
+              / contact_scalar.CXX_HEADER)
     text = header.read_text()
     assert text == contact_scalar.cxx_header()
     assert "NEWTON_STEPS = 7;" in text and "SING_BAND = 0.1;" in text

@@ -46,12 +46,12 @@ def test_table_file_written(tmp_path):
 
 def test_unavailable_lammps_fails_in_one_line(monkeypatch, capsys, tmp_path):
     from mdgran.cli import main
-    from mdgran.lammps_env import LammpsUnavailable
+    from mdgran.backends.lammps.env import LammpsUnavailable
 
     def broken():
         raise LammpsUnavailable("LAMMPS is not available (test); install it with pip")
 
-    monkeypatch.setattr("mdgran.backends.lammps.check_available", broken)
+    monkeypatch.setattr("mdgran.backends.lammps.backend.check_available", broken)
     out = tmp_path / "x.h5"
     assert main(["run", "micro-star", "--backend", "lammps", "--out", str(out)]) == 2
     err = capsys.readouterr().err

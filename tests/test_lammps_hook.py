@@ -1,6 +1,6 @@
 """The compiled Python hook of the LAMMPS backend, per MPI rank, against the native contact.
 
-The hook's kernel (mdgran/backends/lammps_hook.py) performs fix mdgran/chain's operations in its
+The hook's kernel (mdgran/backends/lammps/hook.py) performs fix mdgran/chain's operations in its
 order, so in the step-quantized mode the two are bitwise equal: one rank and two, with atoms
 (and the contact states they carry) migrating between ranks and contacts switching at the
 boundary between ranks.  Its law functions are ContactLaw's and ContactTable's, bit for bit.
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran.backends import lammps_hook as kernel
+from mdgran.backends.lammps import hook as kernel
 from mdgran.contact import ContactLaw, ContactTable, fc_from_lambda
 from mdgran.scene import load_scene
 from mdgran.simulation import run

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
-from mdgran.backends import native_plugin
+from mdgran.backends.lammps import plugin as native_plugin
 from mdgran.contact import FC_DMT, FC_JKR, ContactLaw, fc_from_lambda
 from mdgran.scene import load_scene
 from mdgran.simulation import run
@@ -271,7 +271,7 @@ def test_native_law_is_the_python_law_on_a_grid(plugin, fix_law, law):
     ContactLaw on 81 compressions of the attached branch, from just above snap-off to 40: two
     free beads, the first displaced by delta, ``run 0`` each; the second atom's force is the
     contact force, the fix's scalar its energy.  Measured: equal bit for bit."""
-    from mdgran.lammps_env import new_lammps
+    from mdgran.backends.lammps.env import new_lammps
 
     lmp = new_lammps()
     try:

@@ -13,7 +13,7 @@ PACKAGE = Path(mdgran.__file__).parent
 ROOMS = {
     # the package's namespace (__init__: its version, and public names that load their
     # modules only when used) and helpers every room may use
-    "base": ["__init__", "signals", "rest_blocks", "lammps_env"],
+    "base": ["__init__", "signals", "rest_blocks"],
     "model": ["units", "contact_scalar", "contact", "mixture", "drive", "scene", "chain"],
     "analysis": ["analysis"],
     "backends": ["backends"],

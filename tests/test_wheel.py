@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 import mdgran
-from mdgran.backends import native_plugin
-from mdgran.backends import lammps as lammps_backend
+from mdgran.backends.lammps import backend as lammps_backend
+from mdgran.backends.lammps import plugin as native_plugin
 from mdgran.scene import SCENE_DIR
 from mdgran.sweep import SWEEP_DIR
 

@@ -20,7 +20,7 @@ import importlib
 
 BACKENDS = {
     "reference": "mdgran.backends.reference:ReferenceBackend",
-    "lammps": "mdgran.backends.lammps:LammpsBackend",
+    "lammps": "mdgran.backends.lammps.backend:LammpsBackend",
     "fast": "mdgran.backends.fast:FastBackend",
 }
 

@@ -1,7 +1,7 @@
 """The inner loop of the LAMMPS backend's Python contact hook, compiled with numba.
 
 One call of :func:`contact_step` does, for one MPI rank, what ``fix mdgran/chain`` of the C++
-plugin (``mdgran/lammps_plugin/fix_mdgran_chain.cpp``) does in ``compute``: the same
+plugin (``mdgran/backends/lammps/fix/fix_mdgran_chain.cpp``) does in ``compute``: the same
 floating-point operations in the same order, so that the hook and the native contact agree
 bitwise in the step-quantized mode they share.  Units: mdgran's nondimensional ones (mass 1,
 length p, force eta, time 1/q, energy eta p).
@@ -50,10 +50,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..contact_scalar import (SchwarzConstants, hertz_energy, hertz_force,
+from ...contact_scalar import (SchwarzConstants, hertz_energy, hertz_force,
                               schwarz_constants, schwarz_energy_libm, schwarz_force_libm,
                               spline_cubic, spline_locate)
-from .fast_kernel import variant_jit
+from ..fast_kernel import variant_jit
 
 # error codes of the step (returned with the local index or tag they concern)
 OK, NON_FINITE, BEYOND_TABLE, PARTNER_MISSING = 0, 1, 2, 3
@@ -256,7 +256,7 @@ def mix_parameters(model, table_points=None) -> HookMix:
     (:class:`~mdgran.contact.ContactTable` to ``delta_max = 100`` in the class's own units),
     ``None`` for the exact law.  A substrate-damped homogeneous chain keeps the homogeneous
     contacts (only ``sub_damping`` is read)."""
-    from ..contact import ContactTable
+    from ...contact import ContactTable
 
     mix = model.mixture
     if mix is None:

