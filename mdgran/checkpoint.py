@@ -156,6 +156,44 @@ def resumed(state: dict, ledger: dict) -> Resumed:
                    max(float(np.max(np.abs(np.asarray(v)))) for v in ledger.values()))
 
 
+def resume(path, *, backend: str, scene_toml: str) -> tuple[Resumed, dict, DataDigest]:
+    """Verify the checkpoint in the H5MD file ``path`` (:func:`load`, read-only) and return
+    ``(resumed, meta, digest)``: what the run goes on from (:class:`Resumed`, for the
+    driver), and what the writer goes on with: ``meta["frames"]`` and ``meta["events"]``, the
+    frames and events the checkpoint continues, and ``digest``, their running hashes.
+    Raises :class:`CheckpointError`."""
+    state, meta, digest = load(path, backend=backend, scene_toml=scene_toml,
+                               counts=lambda meta: series_rows(path, meta))
+    return resumed(state, ledger_before(path, int(meta["frames"]))), meta, digest
+
+
+def series_rows(path, meta) -> dict:
+    """Dataset path -> rows that a checkpoint with ``meta`` continues (checksummed): every
+    time series' step, time and value (:func:`~mdgran.h5md_layout.series_paths`) and the
+    events."""
+    import h5py
+
+    from .h5md_layout import series_paths
+
+    with h5py.File(path, "r") as f:
+        groups = series_paths(f)
+    rows = {f"{g}/{k}": int(meta["frames"]) for g in groups for k in ("step", "time", "value")}
+    rows.update({f"events/{k}": int(meta["events"]) for k in ("time", "contact", "kind")})
+    return rows
+
+
+def ledger_before(path, frames: int) -> dict:
+    """``{term: [frames] array}``: the ledger series of the first ``frames`` frames of the
+    H5MD file ``path`` (the terms it holds)."""
+    import h5py
+
+    from .run_record import LEDGER_NAMES
+
+    with h5py.File(path, "r") as f:
+        obs = f["observables"]
+        return {name: obs[f"{name}/value"][:frames] for name in LEDGER_NAMES if name in obs}
+
+
 def has_checkpoint(path) -> bool:
     import h5py
 

@@ -3,7 +3,7 @@ with what moved.
 
 A long chain struck at one end is mostly at rest: beyond the pulse its displacements and
 velocities are exact zeros and its contacts sit in their rest state, frame after frame.  The
-writer (:class:`mdgran.reporters.H5MDWriter`) stores a per-bead or per-contact series of more
+writer (:class:`mdgran.h5md_writer.H5MDWriter`) stores a per-bead or per-contact series of more
 than :data:`BLOCK` columns in HDF5 chunks of one frame by :data:`BLOCK` columns and writes only
 the blocks that hold a value other than the dataset's fill value (0, or the contacts' rest
 state).  HDF5 reads a chunk that was never written as its fill value, so every reader sees
@@ -81,3 +81,42 @@ def lazy_zeros(shape, dtype=float) -> np.ndarray:
     if hasattr(mmap, "MADV_NOHUGEPAGE"):  # a first touch maps 4 kB, not 2 MB to be zeroed
         buf.madvise(mmap.MADV_NOHUGEPAGE)
     return np.frombuffer(buf, dtype=dtype).reshape(shape)
+
+
+def block_mask_within(rows: np.ndarray, width: int, fill, within) -> np.ndarray:
+    """:func:`block_mask` of ``rows``, looked for in the blocks that meet its columns
+    ``within = (c0, c1)`` only (the others are taken to hold ``fill``); None: all."""
+    if within is None:
+        return block_mask(rows, width, fill)
+    nb = -(-rows.shape[1] // width)
+    mask = np.zeros((len(rows), nb), dtype=bool)
+    j0, j1 = within[0] // width, -(-within[1] // width)
+    if j0 < j1:
+        mask[:, j0:j1] = block_mask(rows[:, j0 * width:j1 * width], width, fill)
+    return mask
+
+
+def gather_rows(parts, within) -> np.ndarray:
+    """The rows of ``parts`` (arrays ``[F_k, n]``) together; with ``within = (c0, c1)`` (the
+    columns outside hold zeros) only those columns are copied, into :func:`lazy_zeros` that
+    cost nothing until written."""
+    if within is None:
+        return np.concatenate(parts)
+    out = lazy_zeros((sum(len(p) for p in parts), parts[0].shape[1]))
+    k = 0
+    for p in parts:
+        out[k:k + len(p), within[0]:within[1]] = p[:, within[0]:within[1]]
+        k += len(p)
+    return out
+
+
+def write_blocks(ds, k0: int, rows: np.ndarray, width: int, within=None) -> np.ndarray:
+    """Write ``rows`` [F, n] as rows ``k0 .. k0 + F - 1`` of the HDF5 dataset ``ds`` stored by
+    blocks of ``width`` columns (resized to hold them): only the column runs of the blocks
+    that hold a value other than its fill value (:func:`block_mask_within`); returns that
+    mask ``[F, blocks]``."""
+    ds.resize(k0 + len(rows), axis=0)
+    mask = block_mask_within(rows, width, ds.fillvalue, within)
+    for c0, c1 in column_runs(mask.any(axis=0), width, rows.shape[1]):
+        ds[k0:k0 + len(rows), c0:c1] = rows[:, c0:c1]
+    return mask

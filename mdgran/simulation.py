@@ -15,10 +15,13 @@ with ``LEDGER_EXCEEDED`` and says both numbers.
 
 The driver takes the backend's frames by blocks (:meth:`~mdgran.backends.base.Backend.blocks`:
 the fast backend's kernel calls, a frame each for the others), computes each block's ledger
-once, and hands each block to every reporter: ``reporter.report_block(block)`` (a
-:class:`~mdgran.backends.base.Frames`; ``block.ledger()`` its ledger), or, for a reporter
-without it, ``reporter.report(frame, ledger)`` frame by frame; ``reporter.close(status)`` at
-the end.  A checkpoint falls between blocks.
+once (and its per-contact series, :meth:`~mdgran.backends.base.Frames.contact_series`, when an
+H5MD writer stores them), and hands each block to every reporter:
+``reporter.report_block(block)`` (a :class:`~mdgran.backends.base.Frames`; ``block.ledger()``
+its ledger), or, for a reporter without it, ``reporter.report(frame, ledger)`` frame by frame;
+``reporter.close(status)`` at the end.  The driver decides when a checkpoint is stored (between
+blocks); the writer stores it, and reads back the one a resumed run goes on from
+(:func:`mdgran.checkpoint.resume`).
 """
 from __future__ import annotations
 
@@ -34,8 +37,9 @@ import numpy as np
 from .backends import BadSpec, check_options, get_backend, parse_spec
 from .backends.base import IntegrationError
 from .checkpoint import CheckpointError
-from .progress import CompileNotice
-from .reporters import H5MDWriter, MemoryReporter, ProgressReporter
+from .h5md_writer import H5MDWriter
+from .memory_reporter import MemoryReporter
+from .progress import CompileNotice, ProgressReporter
 from .run_record import ledger_scale, relative_ledger_error
 from .scene import SceneError
 from .signals import FrameSections
@@ -130,7 +134,7 @@ def available_memory() -> float | None:
 def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
-    H5MD writer's buffer (:func:`~mdgran.reporters.buffer_frames` frames of x and v and their
+    H5MD writer's buffer (:func:`~mdgran.h5md_layout.buffer_frames` frames of x and v and their
     copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
     with ``output.contacts``; of the stored beads, ``output.bead_stride``),
     the frames kept
@@ -139,7 +143,7 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     six observables and the step and time they share (positions: a time of their own), the
     series of more than :data:`~mdgran.rest_blocks.BLOCK` beads counted at one block a frame
     (the writer leaves out the blocks at rest)."""
-    from .reporters import buffer_frames, stored_bead_count
+    from .h5md_layout import buffer_frames, stored_bead_count
     from .rest_blocks import BLOCK
 
     n = int(scene.data["chain"]["n"])
@@ -240,7 +244,7 @@ def report(reporter, block) -> None:
 class CheckpointClock:
     """When a run stores a checkpoint: at the first block that ends ``every`` seconds of wall
     time or more after the last one (None: never).  The driver decides and hands the writer
-    the backend's state (:meth:`~mdgran.reporters.H5MDWriter.checkpoint`)."""
+    the backend's state (:meth:`~mdgran.h5md_writer.H5MDWriter.checkpoint`)."""
 
     def __init__(self, every: float | None):
         self.every = every
@@ -284,6 +288,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
                                    progress and writes, checkpoint_every, resume)
     resumed = writer.resumed if writer is not None else None
     watch = LedgerWatch(scene.energy_scale, resumed)
+    detail = any(isinstance(r, H5MDWriter) and r.contacts for r in reps)  # contact series
     clock = CheckpointClock(writer.checkpoint_every if writer is not None else None)
     status, err = "complete", None
     try:
@@ -294,6 +299,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
             for block in b.blocks(resume=resumed.state) if resumed else b.blocks():
                 sections.inside = True
                 watch.update(block.ledger())  # {term: [F]}, computed once for the block
+                if detail:  # {name: [F, n_contacts]}, computed once for the block
+                    block.contact_series()
                 for r in reps:
                     report(r, block)
                 if clock.due():

@@ -13,6 +13,7 @@ import pytest
 
 from conftest import InterruptAt
 
+from mdgran.chain import model_from_scene
 from mdgran.cli import main
 from mdgran.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
 from mdgran.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
@@ -36,7 +37,8 @@ def files(tmp_path_factory):
     sc = _scene()
     extra = {"stride": _scene(bead_stride=STRIDE), "gzip": _scene(compression="gzip"),
              "lzf": _scene(compression="lzf")}
-    writers = [H5MDWriter(d / f"{name}.h5", s, "reference") for name, s in extra.items()]
+    writers = [H5MDWriter(d / f"{name}.h5", s, "reference", model=model_from_scene(s))
+               for name, s in extra.items()]
     run(sc, "reference", out=d / "full.h5", reporters=writers)
     zero = load_scene("micro-star", [("run.duration", T_END), ("output.bead_stride", 0)])
     run(zero, "reference", out=d / "zero.h5")
@@ -183,7 +185,7 @@ def test_long_chain_file_holds_its_contact_numbers(tmp_path):
     """The contact numbers of 10001 contacts (80 kB) exceed HDF5 1.6's 64 kB attribute limit:
     before, any chain above ~8100 beads could not be written at all."""
     sc = load_scene("micro-star", [("chain.n", 10_000), ("output.positions", False)])
-    w = H5MDWriter(tmp_path / "long.h5", sc, "reference")
+    w = H5MDWriter(tmp_path / "long.h5", sc, "reference", model=model_from_scene(sc))
     w.close("complete")
     with h5py.File(tmp_path / "long.h5", "r") as f:
         assert np.array_equal(f["observables/contacts"].attrs["contact"], np.arange(1, 10_002))
