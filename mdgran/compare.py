@@ -444,23 +444,10 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     series = None
     refinements = {b: make_backend(scene, b).refinement(scene) for b in backends}
     if progress:
-        from .progress import RunSeries
-
-        plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
-        series = RunSeries(plan, stream=stream, interval=progress_interval)
-        series.say(f"compare {scene.name}: {len(plan)} runs to t = "
-                   f"{float(scene.data['run']['duration']):g} ({', '.join(backends)}: as "
-                   f"given, refined{f', {ensemble} ensemble members' if ensemble else ''}; "
-                   f"{backends[0]} perturbed by {PERTURBATION:g})")
+        series = _run_series(scene, backends, ensemble, refinements, stream, progress_interval)
     if out_dir is not None:
         clear_previous(Path(out_dir), backends)
-    runs = []
-    for b in backends:
-        try:
-            runs.append(run_backend(scene, b, out_dir, progress, ensemble, series,
-                                    refinements[b]))
-        except IntegrationError as exc:
-            failed_comparison(scene, backends, runs, b, str(exc), out_dir)
+    runs = _run_backends(scene, backends, out_dir, progress, ensemble, series, refinements)
     ref = runs[0]
     pred = predictability(scene, ref, series)
     if series is not None:
@@ -469,13 +456,62 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
         series.say(f"compare {scene.name}: {len(series.keys)} runs done in "
                    f"{fmt_seconds(series.elapsed())}; judging"
                    + (" and writing the report" if out_dir is not None else ""))
+    criteria, pairs = _judge_pairs(scene, ref, runs[1:], pred)
+    report = _report_numbers(scene, backends, runs, pred, criteria, pairs)
+    if out_dir is not None:
+        from .compare_report import write_report
+
+        write_report(Path(out_dir), scene, runs, pred, report, pairs)
+    return report
+
+
+def _run_series(scene, backends: tuple, ensemble: int, refinements: dict, stream,
+                progress_interval):
+    """The progress of every run :func:`compare` makes (:func:`run_plan`), started with a
+    line saying what they are."""
+    from .progress import RunSeries
+
+    plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
+    series = RunSeries(plan, stream=stream, interval=progress_interval)
+    series.say(f"compare {scene.name}: {len(plan)} runs to t = "
+               f"{float(scene.data['run']['duration']):g} ({', '.join(backends)}: as "
+               f"given, refined{f', {ensemble} ensemble members' if ensemble else ''}; "
+               f"{backends[0]} perturbed by {PERTURBATION:g})")
+    return series
+
+
+def _run_backends(scene, backends: tuple, out_dir, progress, ensemble: int, series,
+                  refinements: dict) -> list:
+    """Each backend's runs (:func:`run_backend`) in order; a backend whose integration
+    fails ends the comparison (:func:`failed_comparison`)."""
+    runs = []
+    for b in backends:
+        try:
+            runs.append(run_backend(scene, b, out_dir, progress, ensemble, series,
+                                    refinements[b]))
+        except IntegrationError as exc:
+            failed_comparison(scene, backends, runs, b, str(exc), out_dir)
+    return runs
+
+
+def _judge_pairs(scene, ref, others: list, pred: dict):
+    """``(criteria, pairs)``: every criterion judging each of ``others`` against the
+    reference run ``ref`` (:func:`judge`, then :func:`cluster_statistics` to its horizon),
+    and what was measured per pair, by the other backend's name."""
     criteria, pairs = [], {}
-    for other in runs[1:]:
+    for other in others:
         crit, info = judge(scene, ref, other, pred)
         crit_s, info["clusters"] = cluster_statistics(ref, other, info["horizon"])
         criteria += crit + crit_s
         pairs[other.name] = info
-    report = {
+    return criteria, pairs
+
+
+def _report_numbers(scene, backends: tuple, runs: list, pred: dict, criteria: list,
+                    pairs: dict) -> dict:
+    """The comparison's ``report.json``: verdict, criteria, predictability, the pairs
+    (without the cluster lives), each run's cost and errors, and the thresholds."""
+    return {
         "scene": scene.name,
         "backends": list(backends),
         "passed": all(c.passed for c in criteria),
@@ -491,8 +527,3 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
                           "max_own_error": float(r.error.max())} for r in runs},
         "thresholds": {"predictable_p": PREDICTABLE, "safety": SAFETY},
     }
-    if out_dir is not None:
-        from .compare_report import write_report
-
-        write_report(Path(out_dir), scene, runs, pred, report, pairs)
-    return report

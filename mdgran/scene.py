@@ -662,7 +662,28 @@ def resolve(raw: dict) -> dict:
 
 def _resolve(raw: dict):
     """``(data, sources)``: the resolved data and where each value came from (see
-    :class:`Scene`)."""
+    :class:`Scene`).  The checks run in a fixed order, so a scene with several faults is
+    always refused for the same one."""
+    _check_sections(raw)
+    # a key whose value is None is not given (a resolved scene stores absent keys as None, and
+    # callers re-resolve modified copies of it)
+    raw = {sec: {k: v for k, v in table.items() if v is not None} for sec, table in raw.items()}
+    data = _checked_defaults(raw)
+    sources = {f"{sec}.{name}": ("scene" if name in raw.get(sec, {}) else "default")
+               for sec, keys in SCHEMA.items() for name in keys}
+    scales = _check_material(data, raw, sources)
+    _derive_si(data, raw, scales, sources)
+    _resolve_adhesion(data["contact"], raw.get("contact", {}), scales, sources)
+    _check_counts(data)
+    _check_beads(data, raw)
+    _derive_beads(data, raw, scales, sources)
+    _check_drive(data)
+    _resolve_output(data)
+    return data, sources
+
+
+def _check_sections(raw):
+    """``raw`` is a mapping of known sections to tables holding known keys only."""
     if not isinstance(raw, Mapping):
         raise SceneError("scene", "a scene is a mapping of sections to tables")
     for sec, table in raw.items():
@@ -674,9 +695,11 @@ def _resolve(raw: dict):
             if name not in SCHEMA[sec]:
                 raise SceneError(f"{sec}.{name}", f"unknown key; {sec} allows "
                                  + ", ".join(SCHEMA[sec]))
-    # a key whose value is None is not given (a resolved scene stores absent keys as None, and
-    # callers re-resolve modified copies of it)
-    raw = {sec: {k: v for k, v in table.items() if v is not None} for sec, table in raw.items()}
+
+
+def _checked_defaults(raw: dict) -> dict:
+    """The defaults overlaid with ``raw`` (its None values already dropped), every value
+    checked against its key's kind and limits (:func:`_check_value`)."""
     data = defaults()
     for sec, table in raw.items():
         data[sec].update(table)
@@ -684,12 +707,14 @@ def _resolve(raw: dict):
         for name, key in keys.items():
             data[sec][name] = _check_value(f"{sec}.{name}", data[sec][name], key.kind,
                                            key.allowed)
-    sources = {f"{sec}.{name}": ("scene" if name in raw.get(sec, {}) else "default")
-               for sec, keys in SCHEMA.items() for name in keys}
-    scales = _check_material(data, raw, sources)
-    _derive_si(data, raw, scales, sources)
-    c, ch = data["contact"], data["chain"]
-    given_c = raw.get("contact", {})
+    return data
+
+
+def _resolve_adhesion(c: dict, given_c: dict, scales, sources: dict):
+    """[contact]'s adhesion keys: ``fc`` only for law 'schwarz' and instead of ``lambda``;
+    ``lambda`` and ``fc_rule`` only for 'schwarz' and not beside ``fc``; without either,
+    ``lambda`` follows from the [material]'s scales when there is one.  Keys that are not
+    part of the scene are None, with no source."""
     if c["fc"] is not None and c["law"] != "schwarz":
         raise SceneError("contact.fc", f"applies to law 'schwarz' only (law is {c['law']!r})")
     if c["fc"] is not None and "lambda" in given_c:
@@ -713,6 +738,13 @@ def _resolve(raw: dict):
     for name in ("lambda", "fc", "fc_rule"):
         if c[name] is None:
             sources[f"contact.{name}"] = None
+
+
+def _check_counts(data: dict):
+    """Counts that must agree across sections: a free chain has at least 2 beads, the
+    impulse's bead is in the chain, and run.output_interval gives between 1 and 1e8 frames
+    of run.duration."""
+    ch = data["chain"]
     if ch["boundary"] == "free" and ch["n"] < 2:
         raise SceneError("chain.n", "must be >= 2 for a free chain")
     if data["impulse"]["bead"] > ch["n"]:
@@ -723,17 +755,19 @@ def _resolve(raw: dict):
         raise SceneError("run.output_interval", f"must be at most run.duration = {r['duration']}")
     if r["duration"] / r["output_interval"] > 1e8:
         raise SceneError("run.output_interval", "gives more than 1e8 frames; make it larger")
-    _check_beads(data, raw)
-    _derive_beads(data, raw, scales, sources)
-    _check_drive(data)
+
+
+def _resolve_output(data: dict):
+    """[output]: ``positions`` unset means stored when the stored beads (chain.n over
+    ``bead_stride``, rounded up) are at most :data:`POSITIONS_AUTO_BEADS`; per-contact
+    series need a bead stride >= 1."""
     out = data["output"]
     if out["positions"] is None:
-        stored = -(-ch["n"] // out["bead_stride"]) if out["bead_stride"] else 0
+        stored = -(-data["chain"]["n"] // out["bead_stride"]) if out["bead_stride"] else 0
         out["positions"] = stored <= POSITIONS_AUTO_BEADS
-    if data["output"]["contacts"] and data["output"]["bead_stride"] == 0:
+    if out["contacts"] and out["bead_stride"] == 0:
         raise SceneError("output.contacts", "must be false with output.bead_stride = 0 (no "
                          "per-bead or per-contact series); give a stride >= 1 to store them")
-    return data, sources
 
 
 def _check_drive(data: dict):
@@ -822,16 +856,36 @@ def _check_material(data: dict, raw: dict, sources: dict):
     """A [material] is complete or absent; returns its scales (None without one)."""
     mat, given = data["material"], raw.get("material", {})
     if not any(k in given for k in MATERIAL_KEYS):
-        # modulus = "table" alone is what every resolved scene stores (its default)
-        for name in ("modulus", "D0"):
-            if name in given and not (name == "modulus" and given[name] == "table"):
-                raise SceneError(f"material.{name}", "refines a [material] and needs one: "
-                                 "diameter, E (or K), nu, w, density")
-        mat["D0"] = None
-        for name in SCHEMA["material"]:
-            if name != "modulus":
-                sources[f"material.{name}"] = None
+        _no_material(mat, given, sources)
         return None
+    _check_material_keys(mat, given)
+    if "K" in given:
+        mat["modulus"] = None
+        sources["material.modulus"] = sources["material.E"] = None
+    else:
+        sources["material.K"] = None
+    if mat["D0"] is None:
+        mat["D0"] = D0_DEFAULT
+    return _material_scales(mat)
+
+
+def _no_material(mat: dict, given: dict, sources: dict):
+    """A scene without a [material]: refuses keys that only refine one (``modulus`` =
+    'table' alone is what every resolved scene stores, its default) and leaves the
+    material's keys without a source."""
+    for name in ("modulus", "D0"):
+        if name in given and not (name == "modulus" and given[name] == "table"):
+            raise SceneError(f"material.{name}", "refines a [material] and needs one: "
+                             "diameter, E (or K), nu, w, density")
+    mat["D0"] = None
+    for name in SCHEMA["material"]:
+        if name != "modulus":
+            sources[f"material.{name}"] = None
+
+
+def _check_material_keys(mat: dict, given: dict):
+    """A given [material] has every key without a default, and gives its stiffness one
+    way: E (with ``modulus`` turning it into K) or K."""
     missing = missing_material_keys(mat)
     if missing:
         key, what = (f"material.{missing[0]}", "missing") if len(missing) == 1 else (
@@ -845,13 +899,11 @@ def _check_material(data: dict, raw: dict, sources: dict):
     if "K" in given and "modulus" in given:
         raise SceneError("material.modulus", "sets K from E; with material.K given, leave "
                          "it out")
-    if "K" in given:
-        mat["modulus"] = None
-        sources["material.modulus"] = sources["material.E"] = None
-    else:
-        sources["material.K"] = None
-    if mat["D0"] is None:
-        mat["D0"] = D0_DEFAULT
+
+
+def _material_scales(mat: dict):
+    """The complete [material]'s scales (:func:`scales_from_material`), each finite and
+    positive."""
     try:
         scales = scales_from_material(mat, fill=None)
         for name in ("p", "stiffness", "damping", "time", "velocity", "energy",

@@ -803,7 +803,24 @@ def controls_markdown(ctl: dict) -> list:
 
 
 def markdown(nb: dict, cases: list, small: bool) -> str:
-    d = nb["decay"]
+    """``report.md``: the study's numbers ``nb`` (:func:`make_report`) as Markdown, section
+    by section; the sweep's sections only with ``cases``."""
+    L = _intro_markdown(nb, small)
+    L += _fig2_markdown(nb["decay"], nb["fig2"])
+    L += _fig3_markdown(nb["fig3"])
+    L += _coincidence_markdown(nb)
+    if cases:
+        L += _sweep_markdown(nb, cases)
+    if nb.get("beyond"):
+        L += _beyond_markdown(nb["beyond"])
+    if "long_chain" in nb:
+        L += long_chain_markdown(nb["long_chain"])
+    return "\n".join(L) + "\n"
+
+
+def _intro_markdown(nb: dict, small: bool) -> list:
+    """The report's title and units, the run status, the small-version warning, the
+    controls, the paper's details and the null models with their verdicts."""
     f2 = nb["fig2"]
     L = ["# mdgran report: the paper's study", "",
          "All quantities nondimensional (time in 1/q, energy in eta p); time axes in "
@@ -820,40 +837,57 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
         L += ["| claim (paper) | mdgran's measurement | null | verdict |", "|---|---|---|---|"]
         L += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in null_verdicts(nb["nulls"])]
         L += [""]
-    L += ["## Fig. 2: macro vs micro chain", "", "![fig2](figures/fig2.png)", "",
-          "Kinetic energy T / T(0), running mean over one T_c, at multiples of T_c:", "",
-          "| chain | " + " | ".join(f"{k} T_c" for k in d["micro"]["T_over_T0_at_multiples_of_T_c"])
-          + " | falls below 1/e at | below 1/10 at |",
-          "|---|" + "---|" * (len(d["micro"]["T_over_T0_at_multiples_of_T_c"]) + 2)]
+    return L
+
+
+def _fig2_markdown(d: dict, f2: dict) -> list:
+    """Fig. 2: the kinetic energy T / T(0) of the micro and macro chains at multiples of T_c
+    with its decay times (``d``: :func:`kinetic_decay`), and their C_eff / C_+."""
+    at = d["micro"]["T_over_T0_at_multiples_of_T_c"]
+    L = ["## Fig. 2: macro vs micro chain", "", "![fig2](figures/fig2.png)", "",
+         "Kinetic energy T / T(0), running mean over one T_c, at multiples of T_c:", "",
+         "| chain | " + " | ".join(f"{k} T_c" for k in at)
+         + " | falls below 1/e at | below 1/10 at |",
+         "|---|" + "---|" * (len(at) + 2)]
     for name in ("micro", "macro"):
         row = d[name]
-        vals = [row["T_over_T0_at_multiples_of_T_c"].get(k) for k in
-                d["micro"]["T_over_T0_at_multiples_of_T_c"]]
+        vals = [row["T_over_T0_at_multiples_of_T_c"].get(k) for k in at]
         L.append(f"| {name} | " + " | ".join(_fmt(v) for v in vals) +
                  f" | {_fmt(row['decay_1e_over_T_c'])} T_c | {_fmt(row['decay_10pct_over_T_c'])} "
                  "T_c |")
-    L += ["", f"C_eff / C_+: micro peak {f2['micro']['c_eff_peak']:.3g}, mean "
-          f"{f2['micro']['c_eff_mean']:.3g}; macro peak {f2['macro']['c_eff_peak']:.3g}, mean "
-          f"{f2['macro']['c_eff_mean']:.3g}.", "",
-          "## Fig. 3: clusters and their linearized modes", "", "![fig3](figures/fig3.png)", "",
-          "| cluster | beads | walls | time | omega_1 | omega_2 | wavelet ridge (median) |",
-          "|---|---|---|---|---|---|---|"]
-    for r in nb["fig3"]["clusters"]:
+    return L + ["", f"C_eff / C_+: micro peak {f2['micro']['c_eff_peak']:.3g}, mean "
+                f"{f2['micro']['c_eff_mean']:.3g}; macro peak {f2['macro']['c_eff_peak']:.3g}, "
+                f"mean {f2['macro']['c_eff_mean']:.3g}.", ""]
+
+
+def _fig3_markdown(f3: dict) -> list:
+    """Fig. 3: the clusters with their linearized modes and wavelet ridges."""
+    L = ["## Fig. 3: clusters and their linearized modes", "", "![fig3](figures/fig3.png)", "",
+         "| cluster | beads | walls | time | omega_1 | omega_2 | wavelet ridge (median) |",
+         "|---|---|---|---|---|---|---|"]
+    for r in f3["clusters"]:
         L.append(f"| {r['cluster']} | {r['beads'][0]}-{r['beads'][1]} | "
                  f"{'L' if r['walls'][0] else ''}{'R' if r['walls'][1] else ''} | "
                  f"{r['t'][0]:.1f}-{r['t'][1]:.1f} | {r['omega_1']:.3g} | {r['omega_2']:.3g} | "
                  f"{r['wavelet_ridge_median']:.3g} |")
+    return L
+
+
+def _coincidence_markdown(nb: dict) -> list:
+    """Figs. 4 and 5, and the coincidence of C_eff peaks with re-clustering-rate peaks in
+    the micro chain: the test, its variants over window and prominence, and its sensitivity
+    to the splines' smoothing time."""
     co = nb["fig5"]
-    L += ["", "## Fig. 4: relative velocity amplitude", "", "![fig4](figures/fig4.png)", "",
-          "## Fig. 5: re-clustering rate and effective damping", "", "![fig5](figures/fig5.png)",
-          "", f"Coincidence of C_eff peaks with re-clustering-rate peaks (window T_c): "
-          f"{co['fraction']:.2f} of {co['n_a']} C_eff peaks lie within T_c of one of "
-          f"{co['n_b']} rate peaks, against {co['null_mean']:.2f} +- {co['null_std']:.2f} "
-          f"for 1000 random circular shifts of the rate peaks: p = {co['p_value']:.3f}.", "",
-          "Variants (peak prominence as a fraction of each curve's range; the null shifts the "
-          "second set of peaks):", "",
-          "| window | prominence | test | fraction | shifted (mean) | p | peaks tested | "
-          "other peaks |", "|---|---|---|---|---|---|---|---|"]
+    L = ["", "## Fig. 4: relative velocity amplitude", "", "![fig4](figures/fig4.png)", "",
+         "## Fig. 5: re-clustering rate and effective damping", "", "![fig5](figures/fig5.png)",
+         "", f"Coincidence of C_eff peaks with re-clustering-rate peaks (window T_c): "
+         f"{co['fraction']:.2f} of {co['n_a']} C_eff peaks lie within T_c of one of "
+         f"{co['n_b']} rate peaks, against {co['null_mean']:.2f} +- {co['null_std']:.2f} "
+         f"for 1000 random circular shifts of the rate peaks: p = {co['p_value']:.3f}.", "",
+         "Variants (peak prominence as a fraction of each curve's range; the null shifts the "
+         "second set of peaks):", "",
+         "| window | prominence | test | fraction | shifted (mean) | p | peaks tested | "
+         "other peaks |", "|---|---|---|---|---|---|---|---|"]
     for r in nb["coincidence_windows"]:
         L.append(f"| {r['window_T_c']:g} T_c | {r['prominence']:g} | {r['direction']} | "
                  f"{r['fraction']:.2f} | {r['null_mean']:.2f} | {r['p_value']:.3f} | {r['n']} | "
@@ -864,52 +898,68 @@ def markdown(nb: dict, cases: list, small: bool) -> str:
     for r in nb["smoothing"]:
         L.append(f"| {r['smoothing_time']:g} | {r['c_eff_peak']:.3g} | {r['c_eff_mean']:.3g} | "
                  f"{r['fraction']:.2f} | {r['p_value']:.3f} |")
-    if cases:
-        L += ["", "Pooled over the sweep's cases (each case's rate peaks shifted independently):",
-              "", "| window | range | cases | C_eff peaks | rate peaks | fraction | shifted "
-              "(mean +- sd) | p |", "|---|---|---|---|---|---|---|---|"]
-        for r in nb["coincidence_pooled"]:
-            if r.get("cases"):
-                L.append(f"| {r['window_T_c']:g} T_c | {r['range']} | {r['cases']} | "
-                         f"{r['c_eff_peaks']} | "
-                         f"{r['rate_peaks']} | {r['fraction']:.3f} | {r['null_mean']:.3f} +- "
-                         f"{r['null_std']:.3f} | {r['p_value']:.3g} |")
-        L += ["", f"## Figs. 6, B1-B3: the sweep ({len(cases)} cases)", "",
-              "![fig6](figures/fig6.png)", "", "![figB1](figures/figB1.png)", "",
-              "![figB2](figures/figB2.png)", "", "![figB3](figures/figB3.png)", "",
-              "## Fig. 7: maximum segment C_eff against re-clustering rate", "",
-              "![fig7](figures/fig7.png)", "", "![fig7 literal](figures/fig7_literal.png)", ""]
-        for key, label in (("fig7", "after the impact transient"),
-                           ("fig7_literal", "literal rule")):
-            f = nb[key]
-            if "slope" in f:
-                L.append(f"* {label}: slope {f['slope']:.3g} (95% CI {f['slope_ci95'][0]:.3g} "
-                         f"to {f['slope_ci95'][1]:.3g}), Pearson r = {f['pearson_r']:.2f} "
-                         f"(p = {f['p_value']:.2g}), Spearman rho = {f['spearman_rho']:.2f} "
-                         f"(p = {f['spearman_p']:.2g}), n = {f['n']}.")
-            else:
-                L.append(f"* {label}: too few cases for a fit (n = {f['n']}).")
-        if "realizations" in nb:
-            L += [""] + realizations_markdown(nb["realizations"])
-    if nb.get("beyond"):
-        L += ["", "## Beyond the paper", "",
-              "The same measures on longer chains and over the adhesion parameter lambda "
-              "(representative segment after the impact transient; coincidence window T_c/4, "
-              "pooled over each sweep's cases):", "",
-              "| sweep | beads | backend | cases | Fig. 7 slope (95% CI) | Spearman rho (p) | "
-              "C_eff peaks near a rate peak | shifted | p | max ledger error |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
-        for name, b in nb["beyond"].items():
-            f, co = b["fig7"], b["coincidence_pooled"]
-            fit = (f"{f['slope']:.3g} ({f['slope_ci95'][0]:.3g} to {f['slope_ci95'][1]:.3g})"
-                   if "slope" in f else f"- (n = {f['n']})")
-            rho = f"{f['spearman_rho']:.2f} ({f['spearman_p']:.2g})" if "slope" in f else "-"
-            cof = (f"{co['fraction']:.3f} | {co['null_mean']:.3f} +- {co['null_std']:.3f} | "
-                   f"{co['p_value']:.3g}" if co.get("cases") else "- | - | -")
-            L.append(f"| {name} | {b['n']} | {b['backend']} | {b['cases']} | {fit} | {rho} | {cof} | "
-                     f"{_fmt(b['max_ledger_error'])} |")
-        L.append("")
-        L += [f"![{name}](figures/beyond-{name}.png)" for name in nb["beyond"]]
-    if "long_chain" in nb:
-        L += long_chain_markdown(nb["long_chain"])
-    return "\n".join(L) + "\n"
+    return L
+
+
+def _sweep_markdown(nb: dict, cases: list) -> list:
+    """The sweep's sections: the coincidence test pooled over its ``cases``, Figs. 6 and
+    B1-B3, the Fig. 7 fits and the statistics per realization."""
+    L = ["", "Pooled over the sweep's cases (each case's rate peaks shifted independently):",
+         "", "| window | range | cases | C_eff peaks | rate peaks | fraction | shifted "
+         "(mean +- sd) | p |", "|---|---|---|---|---|---|---|---|"]
+    for r in nb["coincidence_pooled"]:
+        if r.get("cases"):
+            L.append(f"| {r['window_T_c']:g} T_c | {r['range']} | {r['cases']} | "
+                     f"{r['c_eff_peaks']} | "
+                     f"{r['rate_peaks']} | {r['fraction']:.3f} | {r['null_mean']:.3f} +- "
+                     f"{r['null_std']:.3f} | {r['p_value']:.3g} |")
+    L += ["", f"## Figs. 6, B1-B3: the sweep ({len(cases)} cases)", "",
+          "![fig6](figures/fig6.png)", "", "![figB1](figures/figB1.png)", "",
+          "![figB2](figures/figB2.png)", "", "![figB3](figures/figB3.png)", "",
+          "## Fig. 7: maximum segment C_eff against re-clustering rate", "",
+          "![fig7](figures/fig7.png)", "", "![fig7 literal](figures/fig7_literal.png)", ""]
+    for key, label in (("fig7", "after the impact transient"),
+                       ("fig7_literal", "literal rule")):
+        L.append(_fig7_line(label, nb[key]))
+    if "realizations" in nb:
+        L += [""] + realizations_markdown(nb["realizations"])
+    return L
+
+
+def _fig7_line(label: str, f: dict) -> str:
+    """One Fig. 7 fit ``f`` (:func:`mdgran.paper_figures.fit_slope` with its
+    correlations) as a bullet, or why there is none."""
+    if "slope" not in f:
+        return f"* {label}: too few cases for a fit (n = {f['n']})."
+    return (f"* {label}: slope {f['slope']:.3g} (95% CI {f['slope_ci95'][0]:.3g} "
+            f"to {f['slope_ci95'][1]:.3g}), Pearson r = {f['pearson_r']:.2f} "
+            f"(p = {f['p_value']:.2g}), Spearman rho = {f['spearman_rho']:.2f} "
+            f"(p = {f['spearman_p']:.2g}), n = {f['n']}.")
+
+
+def _beyond_markdown(beyond: dict) -> list:
+    """"Beyond the paper": a row per sweep of ``beyond`` (Fig. 7 fit, pooled coincidence,
+    ledger error) and its figure."""
+    L = ["", "## Beyond the paper", "",
+         "The same measures on longer chains and over the adhesion parameter lambda "
+         "(representative segment after the impact transient; coincidence window T_c/4, "
+         "pooled over each sweep's cases):", "",
+         "| sweep | beads | backend | cases | Fig. 7 slope (95% CI) | Spearman rho (p) | "
+         "C_eff peaks near a rate peak | shifted | p | max ledger error |",
+         "|---|---|---|---|---|---|---|---|---|---|"]
+    L += [_beyond_row(name, b) for name, b in beyond.items()]
+    L.append("")
+    return L + [f"![{name}](figures/beyond-{name}.png)" for name in beyond]
+
+
+def _beyond_row(name: str, b: dict) -> str:
+    """The table row of one beyond-the-paper sweep ``b``; '-' where a fit or the pooled
+    test has too few cases."""
+    f, co = b["fig7"], b["coincidence_pooled"]
+    fit = (f"{f['slope']:.3g} ({f['slope_ci95'][0]:.3g} to {f['slope_ci95'][1]:.3g})"
+           if "slope" in f else f"- (n = {f['n']})")
+    rho = f"{f['spearman_rho']:.2f} ({f['spearman_p']:.2g})" if "slope" in f else "-"
+    cof = (f"{co['fraction']:.3f} | {co['null_mean']:.3f} +- {co['null_std']:.3f} | "
+           f"{co['p_value']:.3g}" if co.get("cases") else "- | - | -")
+    return (f"| {name} | {b['n']} | {b['backend']} | {b['cases']} | {fit} | {rho} | {cof} | "
+            f"{_fmt(b['max_ledger_error'])} |")

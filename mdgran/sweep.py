@@ -741,24 +741,41 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
                case_fn, progress_interval) -> list:
     """:func:`run_sweep`'s cases in ``out``, which it holds the lock of."""
     pool = _mpi_executor(workers) if executor == "mpi" and pending_cases(sweep, out) else None
-    (out / "cases").mkdir(parents=True, exist_ok=True)
-    for pattern in ("*.tmp-*", "*.progress"):  # left by a killed sweep (one sweep per DIR)
-        for stale in (out / "cases").glob(pattern):
-            stale.unlink()
-    _atomic_json(out / "sweep.json", {k: v for k, v in sweep.items() if k != "small"})
+    _prepare_sweep_folder(sweep, out)
     todo = pending_cases(sweep, out)
     total, done0 = len(sweep["cases"]), len(sweep["cases"]) - len(todo)
     if progress and done0:
         print(f"sweep {sweep['name']}: {done0} of {total} cases already done, resuming",
               file=stream, flush=True)
-    fn = case_fn or run_case
-    mpi = executor == "mpi"
     status = None
     if progress and todo:  # its line starts at once
         from .progress import SweepProgress
 
         status = SweepProgress(sweep["name"], total, done0, len(todo), out / "cases", stream,
                                progress_interval)
+    if todo:
+        _run_pending(sweep, out, todo, workers, pool, executor == "mpi", case_fn or run_case,
+                     status)
+    elif pool is not None:
+        pool.shutdown()
+    return _collect_results(sweep, out)
+
+
+def _prepare_sweep_folder(sweep: dict, out: Path):
+    """``out/cases`` exists without what a killed sweep left (its temporary and progress
+    files; one sweep per folder), and ``out/sweep.json`` describes ``sweep``."""
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    for pattern in ("*.tmp-*", "*.progress"):
+        for stale in (out / "cases").glob(pattern):
+            stale.unlink()
+    _atomic_json(out / "sweep.json", {k: v for k, v in sweep.items() if k != "small"})
+
+
+def _run_pending(sweep: dict, out: Path, todo: list, workers: int, pool, mpi: bool, fn,
+                 status):
+    """Runs the ``todo`` cases with ``fn`` on the MPI ``pool`` (``mpi``) or on ``workers``
+    processes, reporting to ``status`` (a :class:`mdgran.progress.SweepProgress`, or None);
+    then removes the progress files and, with the processes stopped, their partial files."""
     # workers rewrite their case's progress file at most this often (the main process reads it)
     every = max(0.1, min(2.0, status.mininterval / 2)) if status is not None else None
 
@@ -777,26 +794,33 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
         running[0] = indices
         status.tick(indices)
 
-    if todo:
-        tick_every = min(1.0, status.mininterval) if status is not None else 1.0
-        try:
-            with interrupting():
-                if mpi:
-                    _run_futures(pool, todo, args_of, fn, out, done,
-                                 tick if status is not None else None, tick_every)
-                else:
-                    _run_processes(todo, args_of, fn, workers, out, done,
-                                   tick if status is not None else None, tick_every)
-        finally:
-            if status is not None:
-                status.close()
-            for stale in (out / "cases").glob("*.progress"):
-                stale.unlink(missing_ok=True)
-            if not mpi:  # the workers are stopped: what they were writing goes
-                for stale in (out / "cases").glob("*.tmp-*"):
-                    stale.unlink(missing_ok=True)
-    elif pool is not None:
-        pool.shutdown()
+    tick_every = min(1.0, status.mininterval) if status is not None else 1.0
+    ticker = tick if status is not None else None
+    try:
+        with interrupting():
+            if mpi:
+                _run_futures(pool, todo, args_of, fn, out, done, ticker, tick_every)
+            else:
+                _run_processes(todo, args_of, fn, workers, out, done, ticker, tick_every)
+    finally:
+        if status is not None:
+            status.close()
+        _remove_run_files(out / "cases", partial=not mpi)
+
+
+def _remove_run_files(cases: Path, partial: bool):
+    """Removes the cases' progress files from ``cases`` and, with ``partial`` (the worker
+    processes are stopped), the temporary files they were writing."""
+    for stale in cases.glob("*.progress"):
+        stale.unlink(missing_ok=True)
+    if partial:
+        for stale in cases.glob("*.tmp-*"):
+            stale.unlink(missing_ok=True)
+
+
+def _collect_results(sweep: dict, out: Path) -> list:
+    """Every case's record from ``out/cases`` in the sweep's order (a case run before
+    realizations were asked for takes the sweep's parameters); writes ``summary.json``."""
     results = []
     for c in sweep["cases"]:
         rec = json.loads((out / "cases" / f"{c['index']:04d}.json").read_text())
