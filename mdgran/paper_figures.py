@@ -464,7 +464,8 @@ def fig7(cases, path, rule: str = "", color_key: str = "k1",
 def fig_controls(controls_numbers: dict, path) -> dict:
     """The controls (:mod:`mdgran.controls`): (a) ``T / T(0)`` averaged over one ``T_c``
     against ``t / T_c`` for micro-star and the three macro variants; (b) micro over each
-    macro variant, with the line where they are equal."""
+    macro variant, with the line where they are equal.  A variant whose run failed is left
+    out (the report's table of the controls lists it with the reason)."""
     plt = _plt()
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     vs = controls_numbers["vs_micro"]
@@ -474,6 +475,8 @@ def fig_controls(controls_numbers: dict, path) -> dict:
     first = next(iter(vs.values()))["curves"]
     ax.semilogy(first["s"], first["micro"], color="C3", lw=2.0, label="micro-star")
     for name, (col, ls, label) in styles.items():
+        if name not in vs:  # its run failed or did not run: the report's table says why
+            continue
         c = vs[name]["curves"]
         ax.semilogy(c["s"], c["macro"], color=col, ls=ls, label=label)
         with np.errstate(invalid="ignore", divide="ignore"):

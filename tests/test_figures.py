@@ -240,3 +240,23 @@ def test_clusters_lines_distinct_and_horizon_in_legend(comparison):
         if ln not in horizon:
             backend_colours.add(to_rgba(ln.get_color()))
     assert to_rgba(horizon[0].get_color()) not in backend_colours
+
+
+def test_controls_figure_leaves_out_a_control_whose_run_failed(tmp_path, monkeypatch):
+    """A sweep of the controls in which macro-si's run failed (its LAMMPS run stopped): the
+    figure draws micro-star and the two macro variants that ran, one line each in (b), instead
+    of stopping the report on the missing one."""
+    from mdgran import paper_figures as pf
+
+    s = np.linspace(0.0, 10.0, 21)
+    curves = {"s": s, "micro": np.exp(-0.3 * s), "macro": np.exp(-0.2 * s)}
+    numbers = {"vs_micro": {"macro-pulse": {"curves": curves},
+                            "macro-schwarz": {"curves": {**curves, "macro": np.exp(-0.25 * s)}}}}
+    drawn = []
+    monkeypatch.setattr(pf, "_save", lambda fig, path: drawn.append(fig))
+    assert pf.fig_controls(numbers, tmp_path / "controls.png") == {
+        "path": str(tmp_path / "controls.png")}
+    (ax, bx) = drawn[0].axes[:2]
+    assert [ln.get_label() for ln in ax.get_lines()] == [
+        "micro-star", "macro, Hertz, paper's matching", "macro, Schwarz at its own lambda"]
+    assert len([ln for ln in bx.get_lines() if ln.get_label().startswith("micro / ")]) == 2
