@@ -25,7 +25,7 @@ def paper_wire_k3(scene) -> float | None:
     from .units import wire_cubic, wire_tension
 
     d = sc.diameter
-    k1_si = float(scene.data["substrate"]["k1"]) * sc.stiffness
+    k1_si = float(scene.substrate.k1) * sc.stiffness
     length = 2.5 * d
     k3_si = wire_cubic(400e9, 0.4 * d, wire_tension(k1_si, length), length)
     return k3_si * sc.p**2 / sc.stiffness

@@ -564,18 +564,18 @@ def model_from_scene(scene) -> "ChainModel":
     """Build the model from a resolved scene (see :mod:`mdgran.scene`)."""
     from .contact import law_from_contact_table
 
-    d = scene.data
+    chain, sub = scene.chain, scene.substrate
     return ChainModel(
-        n=int(d["chain"]["n"]),
-        law=law_from_contact_table(d["contact"]),
-        boundary=d["chain"]["boundary"],
-        damping=float(d["contact"]["damping"]),
-        k1=float(d["substrate"]["k1"]),
-        k3=float(d["substrate"]["k3"]),
-        gap=float(d["chain"]["initial_gap"]),
+        n=int(chain.n),
+        law=law_from_contact_table(scene.contact.table()),
+        boundary=chain.boundary,
+        damping=float(scene.contact.damping),
+        k1=float(sub.k1),
+        k3=float(sub.k3),
+        gap=float(chain.initial_gap),
         mixture=scene.mixture,
-        substrate_damping=float(d["substrate"]["damping"]),
-        temperature=float(d["thermal"]["temperature"]),
-        seed=int(d["thermal"]["seed"]),
+        substrate_damping=float(sub.damping),
+        temperature=float(scene.thermal.temperature),
+        seed=int(scene.thermal.seed),
         drive=scene.drive,
     )

@@ -77,15 +77,14 @@ def scene_info(scene) -> dict:
     from .contact import lambda_from_fc, table_error
 
     law = scene.law
-    d = scene.data
     info = {"scene": scene.name, **law.describe()}
     if law.kind == "schwarz":
         # the lambda that the law's fc stands for, under the scene's fc rule
         info["contact_lambda"] = lambda_from_fc(law.fc, law.fc_rule or "cos")
     info.update({
-        "n": d["chain"]["n"], "boundary": d["chain"]["boundary"],
-        "k1": d["substrate"]["k1"], "k3": d["substrate"]["k3"],
-        "damping": d["contact"]["damping"], "impulse_velocity": d["impulse"]["velocity"],
+        "n": scene.chain.n, "boundary": scene.chain.boundary,
+        "k1": scene.substrate.k1, "k3": scene.substrate.k3,
+        "damping": scene.contact.damping, "impulse_velocity": scene.impulse.velocity,
         "impulse_energy": scene.impulse_energy,
     })
     if law.kind == "schwarz":
@@ -97,9 +96,9 @@ def scene_info(scene) -> dict:
         from .units import wire_tension
 
         info.update(sc.as_dict())
-        info["k1_N_per_m"] = d["substrate"]["k1"] * sc.stiffness
-        info["damping_Ns_per_m"] = d["contact"]["damping"] * sc.damping
-        info["impulse_velocity_m_per_s"] = d["impulse"]["velocity"] * sc.velocity
+        info["k1_N_per_m"] = scene.substrate.k1 * sc.stiffness
+        info["damping_Ns_per_m"] = scene.contact.damping * sc.damping
+        info["impulse_velocity_m_per_s"] = scene.impulse.velocity * sc.velocity
         info["impulse_energy_J"] = scene.impulse_energy * sc.energy
         # paper Table II geometry: wire length L_s = 2.5 d
         info["wire_tension_N"] = wire_tension(info["k1_N_per_m"], 2.5 * sc.diameter)
@@ -163,7 +162,7 @@ def cmd_run(args) -> int:
         raise UsageError(f"--checkpoint: must be a number of seconds >= 0 (0: no checkpoints), "
                          f"not {args.checkpoint}")
     scene = _load(args)
-    small = int(scene.data["chain"]["n"]) <= 10_000  # keep frames in memory for the budget
+    small = int(scene.chain.n) <= 10_000  # keep frames in memory for the budget
     try:
         res = run(scene, args.backend, out=args.out, progress=not args.quiet,
                   **{k: v for k, v in (("contact", args.contact), ("events", args.events)) if v},
@@ -182,12 +181,12 @@ def cmd_run(args) -> int:
 
     if not args.quiet and mpi_rank() == 0:
         st = res.stats
-        print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.data['run']['duration']}, "
+        print(f"{scene.name} [{args.backend}] -> {args.out}: t = {scene.run.duration}, "
               f"{_events_in(args.out, st.get('events', '?'))} events, "
               f"wall {st.get('wall_time_s', float('nan')):.2f} s, "
               f"ledger error {res.max_ledger_error:.2e} of E_imp (bound {res.ledger_bound:.2e})")
         if st.get("bead_steps") is not None and st.get("steps"):
-            full = scene.data["chain"]["n"] * st["steps"]
+            full = scene.chain.n * st["steps"]
             front = st.get("front")
             reach = f", beads {front[0]}-{front[1]} in motion" if front else ""
             print(f"bead-steps taken: {st['bead_steps']:.3g} of {full:.3g} "

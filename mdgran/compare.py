@@ -123,7 +123,7 @@ def run_plan(scene, backends, ensemble: int, refinements: dict) -> dict:
     """The runs of a comparison, in order: ``{key: (backend, kind, role, duration)}`` (see
     :class:`mdgran.progress.RunSeries`); ``refinements``: backend -> its refinement's
     overrides."""
-    dur = float(scene.data["run"]["duration"])
+    dur = float(scene.run.duration)
     plan = {}
     for b in backends:
         plan[(b, "nominal")] = (b, "nominal", f"{b} (as given)", dur)
@@ -144,12 +144,11 @@ def scaled_excitation(scene, factor: float):
     pulse's amplitude and the base motion's samples, those it has (an ensemble member or the
     perturbed run of a scene driven by a pulse or a base motion alone differs from the
     nominal one by its drive: scaling a zero impulse would change nothing)."""
-    d = scene.data
-    over = [("impulse.velocity", float(d["impulse"]["velocity"]) * factor)]
-    if d["pulse"]["amplitude"]:
-        over.append(("pulse.amplitude", float(d["pulse"]["amplitude"]) * factor))
-    if d["base"]["kind"] != "none":
-        over.append(("base.values", [float(u) * factor for u in d["base"]["values"]]))
+    over = [("impulse.velocity", float(scene.impulse.velocity) * factor)]
+    if scene.pulse.amplitude:
+        over.append(("pulse.amplitude", float(scene.pulse.amplitude) * factor))
+    if scene.base.kind != "none":
+        over.append(("base.values", [float(u) * factor for u in scene.base.values]))
     return scene.with_overrides(over)
 
 
@@ -347,7 +346,7 @@ def grazing_test(scene, ref: "BackendRuns", other: "BackendRuns"):
     model = model_from_scene(scene)
     column = {int(c): k for k, c in enumerate(model.contact_numbers)}
     offs = np.broadcast_to(model.delta_off, (model.n_contacts,))
-    frame = float(scene.data["run"]["output_interval"])
+    frame = float(scene.run.output_interval)
 
     def undecidable(t, contact, kind, side, slack) -> bool:
         tr = other.nominal if side == "first" else ref.nominal
@@ -405,7 +404,7 @@ def judge(scene, ref: BackendRuns, other: BackendRuns, pred: dict) -> tuple[list
                               float(abs(a - b) / scale), float(thr / scale), f"{ref.name} {a:.6g}, {other.name} {b:.6g} "
                               f"(units eta p; measured and threshold relative to E_imp)"))
     # events
-    tau = FLICKER_STEPS * float(scene.data["run"]["dt"])
+    tau = FLICKER_STEPS * float(scene.run.dt)
     ta, sa, drop_a = event_sequence(ref.nominal, th, tau)
     tb, sb, drop_b = event_sequence(other.nominal, th, tau)
     ev = compare_events(ta, sa, tb, sb, th, tau, grazing_test(scene, ref, other))

@@ -12,13 +12,7 @@ from .storage import write_atomic
 def _adhesive(scene) -> bool:
     """Does the scene's contact law stick (Schwarz, JKR, DMT: snap-off and snap-to events) or
     not (Hertz: contacts only separate and touch)?"""
-    from .contact import law_from_contact_table
-
-    contact = scene.data.get("contact", {})
-    try:
-        return law_from_contact_table(contact).kind != "hertz"
-    except (ValueError, TypeError):
-        return contact.get("law", "schwarz") != "hertz"
+    return scene.contact.law != "hertz"
 
 
 def event_labels(scene) -> tuple:

@@ -32,7 +32,7 @@ CONTROLS = {
 
 def si_matched_velocity(micro_scene, macro_scene) -> float:
     """The macro chain's nondimensional impulse that equals the micro chain's in m/s."""
-    v_si = float(micro_scene.data["impulse"]["velocity"]) * micro_scene.scales.velocity
+    v_si = float(micro_scene.impulse.velocity) * micro_scene.scales.velocity
     return v_si / macro_scene.scales.velocity
 
 
@@ -169,9 +169,9 @@ def summarize(trajs: dict, scenes: dict, backends: dict) -> dict:
         sc = tr.scene  # the scene the run stored
         out["runs"][name] = {
             "backend": backends[name], "status": tr.attrs.get("status"),
-            "impulse_velocity": float(sc.data["impulse"]["velocity"]),
-            "impulse_m_per_s": float(sc.data["impulse"]["velocity"] * sc.scales.velocity),
-            "law": sc.law.kind, "lambda": sc.data["contact"].get("lambda"),
+            "impulse_velocity": float(sc.impulse.velocity),
+            "impulse_m_per_s": float(sc.impulse.velocity * sc.scales.velocity),
+            "law": sc.law.kind, "lambda": sc.contact.lambda_,
             "duration": float(tr.time[-1]), "decay_1e_over_T_c": decay_time(tr),
             "decay_10pct_over_T_c": decay_time(tr, 0.1), **cluster_activity(tr)}
     for name in ("macro-pulse", "macro-si", "macro-schwarz"):

@@ -187,14 +187,13 @@ class Drive:
 
 def drive_from_scene(scene) -> Drive | None:
     """The scene's :class:`Drive`, or None when it has neither a pulse nor a base motion."""
-    p, b = scene.data["pulse"], scene.data["base"]
+    p, b = scene.pulse, scene.base
     pulse = base = None
-    if p["amplitude"]:
-        pulse = Pulse(int(p["bead"]) - 1, float(p["amplitude"]), float(p["duration"]),
-                      float(p["start"]))
-    if b["kind"] == "displacement":
-        base = base_from_displacement(b["interval"], b["values"])
-    elif b["kind"] == "acceleration":
-        base = base_from_acceleration(b["interval"], b["values"])
+    if p.amplitude:
+        pulse = Pulse(int(p.bead) - 1, float(p.amplitude), float(p.duration), float(p.start))
+    if b.kind == "displacement":
+        base = base_from_displacement(b.interval, b.values)
+    elif b.kind == "acceleration":
+        base = base_from_acceleration(b.interval, b.values)
     drive = Drive(pulse, base)
     return drive if drive else None

@@ -136,7 +136,7 @@ def run_pulse(n: int, v0: float = 12.0, lam: float | None = None, duration: floa
     from .chain import model_from_scene
 
     profile = pulse_profile(tracker, model_from_scene(scene), v0)
-    profile["lambda"] = scene.data["contact"]["lambda"]
+    profile["lambda"] = scene.contact.lambda_
     return profile, res
 
 

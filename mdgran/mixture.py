@@ -290,24 +290,23 @@ def mixture_from_scene(scene) -> Mixture | None:
     pair's ``fc`` follows from ``contact.lambda`` times its length scale (by
     ``contact.fc_rule``); with ``contact.fc`` given, or law jkr or dmt, every pair has the
     scene's ``fc``."""
-    d = scene.data
-    beads, striker, n = d["beads"], d["striker"], int(d["chain"]["n"])
-    s = pattern_diameters(beads, n)
-    density = np.broadcast_to(np.asarray(beads["density"], dtype=float), (n,)).copy()
+    beads, striker, n = scene.beads, scene.striker, int(scene.chain.n)
+    s = pattern_diameters(beads.table(), n)
+    density = np.broadcast_to(np.asarray(beads.density, dtype=float), (n,)).copy()
     substrate = np.ones(n)
-    if striker["diameter"] is not None:
-        s[0], density[0], substrate[0] = striker["diameter"], striker["density"], 0.0
-    per_bead = [s, density, np.asarray(beads["modulus"], dtype=float),
-                np.asarray(beads["adhesion"], dtype=float), substrate]
-    pair_w = beads["pair_adhesion"]
+    if striker.diameter is not None:
+        s[0], density[0], substrate[0] = striker.diameter, striker.density, 0.0
+    per_bead = [s, density, np.asarray(beads.modulus, dtype=float),
+                np.asarray(beads.adhesion, dtype=float), substrate]
+    pair_w = beads.pair_adhesion
     if all(np.all(v == 1.0) for v in per_bead) and pair_w in (None, 1.0):
         return None
     law = scene.law
-    contact = d["contact"]
-    lam = contact.get("lambda") if law.kind == "schwarz" else None
-    info = {"pattern": beads["pattern"], "striker": striker["diameter"] is not None,
+    contact = scene.contact
+    lam = contact.lambda_ if law.kind == "schwarz" else None
+    info = {"pattern": beads.pattern, "striker": striker.diameter is not None,
             "units": "those of the reference bead (diameter, density, modulus and adhesion "
                      "ratios 1): mass m0, force eta0 = pi R0 w0, length p0"}
-    return mixture_from_ratios(law, d["chain"]["boundary"] == "fixed", s, density,
-                               beads["modulus"], beads["adhesion"], pair_w, lam,
-                               contact.get("fc_rule") or "cos", substrate, info)
+    return mixture_from_ratios(law, scene.chain.boundary == "fixed", s, density,
+                               beads.modulus, beads.adhesion, pair_w, lam,
+                               contact.fc_rule or "cos", substrate, info)

@@ -68,6 +68,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from .contact import FC_RULES, LAWS, SNAP_OFF_RULES, ContactLaw, law_from_contact_table
+from .scene_records import record_types, section_records
 from .units import D0_DEFAULT, missing_material_keys, scales_from_material
 
 SCENE_DIR = Path(__file__).parent / "scenes"
@@ -343,6 +344,11 @@ SCHEMA = {
     },
 }
 
+#: section -> its frozen record type (``scene.run`` is a ``RunSection``), generated from
+#: :data:`SCHEMA` (:mod:`mdgran.scene_records`)
+SECTION_TYPES = record_types(SCHEMA, __name__)
+globals().update({cls.__name__: cls for cls in SECTION_TYPES.values()})  # records pickle
+
 #: [material] keys that make a material (modulus and D0 alone refine one, they make none)
 MATERIAL_KEYS = ("diameter", "E", "K", "nu", "w", "density")
 
@@ -482,23 +488,36 @@ class Scene:
     :meth:`with_overrides` resolves again; ``sources`` says where each value of ``data`` came
     from: ``"scene"`` (given), ``"default"``, ``"material"`` (derived from ``[material]``), or
     the SI key it was converted from (``"substrate.k1_si"``); ``None`` for a key the scene does
-    not use.  Both are ``None`` for a Scene made directly from resolved data."""
+    not use.  Both are ``None`` for a Scene made directly from resolved data.
+
+    Each section is also a frozen record (:data:`SECTION_TYPES`, :mod:`mdgran.scene_records`),
+    an attribute named as the section: ``scene.run.dt``, ``scene.chain.n``,
+    ``scene.impulse.velocity``.  The records are built from ``data`` when the Scene is made (a
+    later change to ``data`` reaches them through :meth:`own_copy`, as it reaches a run)."""
 
     name: str
     data: dict = field(repr=False)
     given: dict | None = field(default=None, repr=False, compare=False)
     sources: dict | None = field(default=None, repr=False, compare=False)
 
+    def __post_init__(self):
+        for sec, record in section_records(SECTION_TYPES, self.data).items():
+            object.__setattr__(self, sec, record)
+
+    def __reduce__(self):
+        """Pickled and copied as its fields: the copy builds its records from its data."""
+        return (Scene, (self.name, self.data, self.given, self.sources))
+
     @property
     def law(self) -> ContactLaw:
-        return law_from_contact_table(self.data["contact"], self.lambda_source)
+        return law_from_contact_table(self.contact.table(), self.lambda_source)
 
     @property
     def lambda_source(self) -> str | None:
         """Where ``contact.lambda`` came from: ``"scene"``, ``"material"``, ``"default"``;
         ``None`` if the law does not use it (``contact.fc`` given, or a law other than
         schwarz)."""
-        if self.data["contact"].get("lambda") is None:
+        if self.contact.lambda_ is None:
             return None
         if self.sources is None:
             return "scene"  # made from resolved data: every value is as given
@@ -506,8 +525,9 @@ class Scene:
 
     @property
     def scales(self):
-        mat = self.data.get("material", {})
-        return scales_from_material(mat, fill=None) if mat.get("diameter") is not None else None
+        if self.material.diameter is None:
+            return None
+        return scales_from_material(self.material.table(), fill=None)
 
     @cached_property
     def mixture(self):
@@ -521,9 +541,9 @@ class Scene:
     def impulse_energy(self) -> float:
         """``E_imp = m_b v0^2 / 2`` (units eta p), ``m_b`` the struck bead's mass (1 but in a
         chain of unlike beads)."""
-        v0 = float(self.data["impulse"]["velocity"])
+        v0 = float(self.impulse.velocity)
         mix = self.mixture
-        m = 1.0 if mix is None else float(mix.mass[int(self.data["impulse"]["bead"]) - 1])
+        m = 1.0 if mix is None else float(mix.mass[int(self.impulse.bead) - 1])
         return 0.5 * m * v0**2
 
     @cached_property
@@ -541,12 +561,12 @@ class Scene:
         if self.drive is None:
             return self.impulse_energy
         mix = self.mixture
-        n = self.data["chain"]["n"]
+        n = self.chain.n
         mass = np.ones(n) if mix is None else mix.mass
         g = np.ones(n) if mix is None else mix.substrate
-        sub = self.data["substrate"]
-        return self.impulse_energy + self.drive.energy(mass, g, sub["k1"], sub["k3"],
-                                                       float(self.data["run"]["duration"]))
+        sub = self.substrate
+        return self.impulse_energy + self.drive.energy(mass, g, sub.k1, sub.k3,
+                                                       float(self.run.duration))
 
     def own_copy(self) -> "Scene":
         """An independent copy, its data resolved and checked again (what a run keeps: a later

@@ -146,12 +146,12 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     from .h5md_layout import buffer_frames, stored_bead_count
     from .rest_blocks import BLOCK
 
-    n = int(scene.data["chain"]["n"])
-    ns = stored_bead_count(n, int(scene.data["output"].get("bead_stride", 1)))  # stored beads
-    r = scene.data["run"]
-    frames = int(float(r["duration"]) / float(r["output_interval"]) + 1e-9) + 1
-    pos = 3 if scene.data["output"]["positions"] else 0
-    detail = bool(scene.data["output"].get("contacts"))
+    n = int(scene.chain.n)
+    ns = stored_bead_count(n, int(scene.output.bead_stride))  # stored beads
+    r = scene.run
+    frames = int(float(r.duration) / float(r.output_interval) + 1e-9) + 1
+    pos = 3 if scene.output.positions else 0
+    detail = bool(scene.output.contacts)
     con = (17.0 if detail else 1.0) / 8.0  # per contact: 2 f8 + 1 i1, or the i1 state alone
     block = min(frames, buffer_frames(8.0 * ns * (2 + pos + con)))
     memory = 8.0 * n * 10 + 8.0 * ns * block * (4 + pos + con) + (
@@ -336,7 +336,7 @@ def _reporters(scene, backend, reporters, keep, out, progress, checkpoint_every,
               if out is not None else None)
     reps += [r for r in (mem, writer) if r is not None]
     if progress:
-        reps.append(ProgressReporter(float(scene.data["run"]["duration"]),
+        reps.append(ProgressReporter(float(scene.run.duration),
                                      label=f"{scene.name} [{backend.name}]"))
     return reps, mem, writer
 

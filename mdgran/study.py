@@ -64,7 +64,7 @@ def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None
         if progress:
             from .progress import ProgressReporter
 
-            reporters.append(ProgressReporter(float(scene.data["run"]["duration"]),
+            reporters.append(ProgressReporter(float(scene.run.duration),
                                               label=label or f"{name} [{backend}]"))
         run(scene, backend, out=path, progress=False, keep=False, reporters=reporters)
     return read_h5(path)
@@ -333,7 +333,7 @@ def beyond_sweep(name, out, figs, workers, small, progress, backend) -> dict:
     late = [{**c, "c_eff_max_segment": c["c_eff_late_segment"],
              "c_eff_max_segment_rate": c["c_eff_late_segment_rate"]} for c in bc]
     return {
-        "cases": len(bc), "n": bc[0]["scene"].data["chain"]["n"] if bc else None,
+        "cases": len(bc), "n": bc[0]["scene"].chain.n if bc else None,
         "fig7": pf.fig7(late, figs / f"beyond-{name}.png", "segments starting at t >= T_c/2",
                         color_key=key, color_label=label, title=name, log_color=log),
         "coincidence_pooled": pooled_coincidence(bc, 0.25, n_shifts=200 if small else 1000),

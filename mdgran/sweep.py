@@ -214,7 +214,7 @@ def scene_digest(scene: str) -> str:
 def _realization_cases(scene: str, grid_cases: list, n_real: int, eps: float) -> list:
     """The cases of ``n_real`` realizations of each grid case, realization the slowest axis."""
     vel = ("impulse.velocity", "impulse.velocity_si")
-    base = [float(load_scene(scene, c["overrides"]).data["impulse"]["velocity"])
+    base = [float(load_scene(scene, c["overrides"]).impulse.velocity)
             for c in grid_cases]
     cases = []
     for r in range(n_real):
@@ -296,7 +296,7 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
         from .progress import ProgressFile
 
         reporters.append(ProgressFile(cases / f"{stem}.progress",
-                                      float(scene.data["run"]["duration"]), progress_every))
+                                      float(scene.run.duration), progress_every))
     res = run(scene, backend, out=cases / f"{stem}.h5", raise_errors=False, collective=False,
               reporters=reporters, **options)
     summary = {"index": case["index"], "params": case["params"], **case_summary(res)}

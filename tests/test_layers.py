@@ -14,7 +14,8 @@ ROOMS = {
     # the package's namespace (__init__: its version, and public names that load their
     # modules only when used) and helpers every room may use
     "base": ["__init__", "signals", "rest_blocks"],
-    "model": ["units", "contact_scalar", "contact", "mixture", "drive", "scene", "chain"],
+    "model": ["units", "contact_scalar", "contact", "mixture", "drive", "scene_records", "scene",
+              "chain"],
     "analysis": ["analysis"],
     "backends": ["backends"],
     "output": ["storage", "checkpoint", "measures", "run_record", "trajectory", "progress",

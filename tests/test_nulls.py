@@ -132,7 +132,7 @@ def test_channel_damping_adds_up():
     kin = 0.5 * np.exp(-0.02 * t) * np.sin(t) ** 2 + 0.01
     ledger = {"kinetic_energy": kin, "dissipated_viscous": 0.3 * (1 - np.exp(-0.02 * t)),
               "dissipated_hysteresis": 0.1 * np.floor(t / 20.0)}
-    scene = SimpleNamespace(data={"contact": {"damping": 0.5}})
+    scene = SimpleNamespace(contact=SimpleNamespace(damping=0.5))  # a scene's [contact]
     traj = SimpleNamespace(time=t, ledger=ledger, n=3, scene=scene)
     ch = an.channel_damping(traj)
     scale = np.max(np.abs(ch["total"]))  # the spline solve is linear to ~1e-10 of the scale

@@ -1,7 +1,11 @@
 """Scene overrides: load_scene(name, overrides) and Scene.with_overrides accept the same keys."""
+import dataclasses
+import keyword
+import pickle
+
 import pytest
 
-from mdgran.scene import SceneError, load_scene
+from mdgran.scene import SCHEMA, SceneError, builtin_scenes, load_scene
 
 # keys with two ways of being given (fc for lambda; SI for nondimensional); micro-star has a
 # [material] and a schwarz law
@@ -65,3 +69,43 @@ def test_the_impulse_velocity_message_names_its_limit(capsys):
     assert main(["info", "micro-star", "--set", "impulse.velocity=5001"]) == 2
     err = capsys.readouterr().err
     assert "|v| <= 5e3" in err and "5001" in err
+
+
+def _record_value(record, key: str):
+    """``record``'s field for scene key ``key`` (``lambda`` is the field ``lambda_``)."""
+    return getattr(record, key + "_" if keyword.iskeyword(key) else key)
+
+
+@pytest.mark.parametrize("name", sorted(builtin_scenes()))
+def test_section_records_hold_the_scene_data(name):
+    """Every key of every section of a built-in scene is a field of the section's record
+    (``scene.run.dt``) with the value ``scene.data`` holds (a list as a tuple of the same
+    numbers), and nothing else is; records and the scene refuse assignment."""
+    scene = load_scene(name)
+    assert set(scene.data) == set(SCHEMA)
+    for sec, table in scene.data.items():
+        record = getattr(scene, sec)
+        assert [f.name.rstrip("_") for f in dataclasses.fields(record)] == list(table)
+        for key, value in table.items():
+            got = _record_value(record, key)
+            if isinstance(value, list):
+                assert isinstance(got, tuple) and list(got) == value, f"{sec}.{key}"
+            else:
+                assert type(got) is type(value) and got == value, f"{sec}.{key}"
+        first = dataclasses.fields(record)[0].name
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(record, first, getattr(record, first))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scene.run = scene.run
+
+
+def test_section_records_follow_overrides_and_copies():
+    """An override, a pickled copy and a run's own copy (after ``data`` was changed) each
+    build their records from their own data."""
+    scene = load_scene("driven/shaken", [("run.dt", 0.005), ("contact.lambda", 1.25)])
+    assert (scene.run.dt, scene.contact.lambda_) == (0.005, 1.25)
+    assert scene.base.values[:3] == tuple(scene.data["base"]["values"][:3])
+    back = pickle.loads(pickle.dumps(scene))
+    assert back == scene and back.run == scene.run and back.base == scene.base
+    scene.data["impulse"]["velocity"] = 3.0
+    assert scene.own_copy().impulse.velocity == 3.0

@@ -179,7 +179,7 @@ def dissipated_energy(traj) -> np.ndarray:
 
 def contact_damping(scene) -> float:
     """``C_+`` in units of the damping scale: the scene's ``contact.damping`` (``C_hat``)."""
-    return float(scene.data["contact"]["damping"])
+    return float(scene.contact.damping)
 
 
 def effective_damping(run, *, smoothing_time: float = SMOOTHING_TIME,

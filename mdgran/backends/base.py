@@ -217,7 +217,7 @@ def scene_features(scene, model) -> list:
     ``"substrate damping"``."""
     out = []
     if model.mixed:
-        key = "striker.diameter" if scene.data["striker"]["diameter"] is not None else "beads"
+        key = "striker.diameter" if scene.striker.diameter is not None else "beads"
         out.append(("mixture", key, "chains of unlike beads ([beads], [striker])"))
     if model.temperature:
         out.append(("thermal", "thermal.temperature", "initial random velocities"))
@@ -276,7 +276,7 @@ class Backend:
         Fixed-step backends of order ``p`` halve ``run.dt``: Richardson gives
         ``error(dt) ~ |x_dt - x_dt/2| * 2^p / (2^p - 1)``.
         """
-        dt = float((self.scene if scene is None else scene).data["run"]["dt"])
+        dt = float((self.scene if scene is None else scene).run.dt)
         return [("run.dt", dt / 2)], 2.0**self.order / (2.0**self.order - 1.0)
 
     # ---- declared energy-ledger bound (a run that exceeds it is not "complete") -----------
@@ -349,7 +349,7 @@ class Backend:
         return type(self).checkpoint_state is not Backend.checkpoint_state
 
     def output_times(self) -> np.ndarray:
-        run = self.scene.data["run"]
-        dt_out = float(run["output_interval"])
-        n_out = int(np.floor(float(run["duration"]) / dt_out + 1e-9))
+        run = self.scene.run
+        dt_out = float(run.output_interval)
+        n_out = int(np.floor(float(run.duration) / dt_out + 1e-9))
         return dt_out * np.arange(n_out + 1)

@@ -144,14 +144,14 @@ class FastBackend(Backend):
     def __init__(self, scene, locate_events: bool = True, contact_eval: str = "table",
                  table_points: int | None = None, delta_max: float = 100.0, **options):
         super().__init__(scene, **options)
-        run = scene.data["run"]
-        self.dt = float(options.get("dt", run["dt"]))
-        spf = steps_per_frame(self.dt, float(run["output_interval"]))
+        run = scene.run
+        self.dt = float(options.get("dt", run.dt))
+        spf = steps_per_frame(self.dt, float(run.output_interval))
         check_excitation_steps(self.model, self.dt, self.name)
         if contact_eval not in ("table", "exact"):
             raise SceneError("contact_eval", f"must be 'table' or 'exact', not {contact_eval!r}")
         self.steps_per_frame = spf
-        self.threads = usable_threads(int(options.get("threads", run.get("threads", 0))))
+        self.threads = usable_threads(int(options.get("threads", run.threads)))
         self.locate = bool(locate_events)
         if not self.locate:
             self.order = 1
@@ -370,8 +370,8 @@ class FastBackend(Backend):
         cnt = self.counters
         kernel_args = fk.plain((self.params, self.buffers, self.ks))
         if resume is None:
-            imp = self.scene.data["impulse"]
-            x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
+            imp = self.scene.impulse
+            x, v, closed = self.model.initial_state(int(imp.bead), float(imp.velocity))
             now = self._current()
             now.x[:], now.v[:], self.closed[:] = x, v, closed
             self._rest_x = rest_displacement(x)

@@ -129,7 +129,7 @@ class ReferenceBackend(Backend):
 
     def __init__(self, scene, **options):
         super().__init__(scene, **options)
-        self.tol = float(options.get("tolerance", scene.data["run"]["tolerance"]))
+        self.tol = float(options.get("tolerance", scene.run.tolerance))
         m = self.model
         self.n = m.n
         self.delta_off = m.delta_off  # a number, or per contact for unlike beads
@@ -153,14 +153,14 @@ class ReferenceBackend(Backend):
     def refinement(cls, scene):
         """The same scene at 1/100 of the tolerance; its difference from the nominal run is
         taken as the nominal run's error."""
-        return [("run.tolerance", max(float(scene.data["run"]["tolerance"]) / 100, 1e-14))], 1.0
+        return [("run.tolerance", max(float(scene.run.tolerance) / 100, 1e-14))], 1.0
 
     def ledger_model(self) -> float:
         """Ledger bound per unit of the energy scale: ``LEDGER_TOL_MULTIPLE * max(tol,
         LEDGER_TOL_FLOOR) * (1 + T / LEDGER_TOL_TIME)``, ``T`` the run's duration: step control
         is local, so the ledger error of a long run grows with ``T`` (constants and their
         calibration in :mod:`mdgran.backends.base`)."""
-        t = float(self.scene.data["run"]["duration"])
+        t = float(self.scene.run.duration)
         return (LEDGER_TOL_MULTIPLE * max(self.tol, LEDGER_TOL_FLOOR)
                 * (1.0 + t / LEDGER_TOL_TIME))
 
@@ -208,7 +208,7 @@ class ReferenceBackend(Backend):
         if self._singular is None:
             return False
         if h is None:  # first step: no step size yet, judge on the output interval
-            h = float(self.scene.data["run"]["output_interval"])
+            h = float(self.scene.run.output_interval)
         if self._singular == "approach":
             near = self._closed & (gd < 0.0)
             return bool(np.any(g[near] < -gd[near] * NEAR_STEPS * h))
@@ -369,8 +369,8 @@ class ReferenceBackend(Backend):
 
     def _start(self) -> _Loop:
         """The initial state (the scene's impulse), settled: the state of frame 0."""
-        imp = self.scene.data["impulse"]
-        x, v, closed = self.model.initial_state(int(imp["bead"]), float(imp["velocity"]))
+        imp = self.scene.impulse
+        x, v, closed = self.model.initial_state(int(imp.bead), float(imp.velocity))
         self._closed = closed
         self._d_hyst = 0.0
         ledger = [0.0, 0.0] if self.model.drive is not None else [0.0]  # D_viscous (, W)

@@ -195,9 +195,9 @@ class LammpsBackend(Backend):
         super().__init__(scene, **options)
         self._check_law_tables(contact_eval)
         self.extra_commands = list(extra_commands)
-        run = scene.data["run"]
-        self.dt = float(options.get("dt", run["dt"]))
-        self.steps_per_frame = steps_per_frame(self.dt, float(run["output_interval"]))
+        run = scene.run
+        self.dt = float(options.get("dt", run.dt))
+        self.steps_per_frame = steps_per_frame(self.dt, float(run.output_interval))
         check_excitation_steps(self.model, self.dt, self.name)
         self.comm = comm
         m = self.model
@@ -236,13 +236,12 @@ class LammpsBackend(Backend):
             lmp = new_lammps(comm=self.comm)
         except LammpsUnavailable as exc:
             raise IntegrationError(str(exc)) from None
-        d = self.scene.data
-        bead = int(d["impulse"]["bead"])
+        bead = int(self.scene.impulse.bead)
         struck = bead + 1 if self.walls else bead
         spacing = self.bead_spacing()
         variables = {"ntot": self.ntot, "spacing": repr(spacing), "walls": int(self.walls),
                      "k1": repr(float(self.model.k1)), "struck": struck,
-                     "v0": repr(float(d["impulse"]["velocity"])), "dt": repr(self.dt),
+                     "v0": repr(float(self.scene.impulse.velocity)), "dt": repr(self.dt),
                      "ghostcut": repr(spacing * (LOCATED_GHOST_SPACINGS
                                                  if self.event_mode == "located"
                                                  else GHOST_SPACINGS)),
@@ -429,9 +428,8 @@ class LammpsBackend(Backend):
         m = self.model
         if not (m.mixed or m.temperature):
             return
-        d = self.scene.data
-        x_start, v_start, _ = m.initial_state(int(d["impulse"]["bead"]),
-                                              float(d["impulse"]["velocity"]))
+        imp = self.scene.impulse
+        x_start, v_start, _ = m.initial_state(int(imp.bead), float(imp.velocity))
         first = 2 if self.walls else 1  # tag of bead 0
         n = lmp.extract_setting("nlocal")
         ex = lmp.numpy.extract_atom
