@@ -473,7 +473,7 @@ def _run_series(scene, backends: tuple, ensemble: int, refinements: dict, stream
     plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
     series = RunSeries(plan, stream=stream, interval=progress_interval)
     series.say(f"compare {scene.name}: {len(plan)} runs to t = "
-               f"{float(scene.data['run']['duration']):g} ({', '.join(backends)}: as "
+               f"{float(scene.run.duration):g} ({', '.join(backends)}: as "
                f"given, refined{f', {ensemble} ensemble members' if ensemble else ''}; "
                f"{backends[0]} perturbed by {PERTURBATION:g})")
     return series

@@ -74,13 +74,13 @@ class H5MDWriter:
         else:
             self.tmp = temporary_path(self.path)
         self.scene, self.model, self.backend = scene, model, backend
-        out = scene.data["output"]
-        self.positions = out["positions"] if positions is None else positions
-        self.contacts = bool(out.get("contacts", False)) if contacts is None else bool(contacts)
-        self.stride = int(out.get("bead_stride", 1))
-        self.filters = COMPRESSION[out.get("compression", "none")]
-        self.bead_ids = layout.stored_beads(int(scene.data["chain"]["n"]), self.stride)
-        self._beads = slice(0, int(scene.data["chain"]["n"]), self.stride or 1)  # of x, v
+        out = scene.output
+        self.positions = out.positions if positions is None else positions
+        self.contacts = bool(out.contacts) if contacts is None else bool(contacts)
+        self.stride = int(out.bead_stride)
+        self.filters = COMPRESSION[out.compression]
+        self.bead_ids = layout.stored_beads(int(scene.chain.n), self.stride)
+        self._beads = slice(0, int(scene.chain.n), self.stride or 1)  # of x, v
         self._cols = layout.stored_contacts(model.n_contacts, self.stride)
         self.mpi_ranks = None  # known once the backend has started (first frame)
         self.stats_source = stats_source
