@@ -298,14 +298,8 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
         with notice, FrameSections() as sections:
             for block in b.blocks(resume=resumed.state) if resumed else b.blocks():
                 sections.inside = True
-                watch.update(block.ledger())  # {term: [F]}, computed once for the block
-                if detail:  # {name: [F, n_contacts]}, computed once for the block
-                    block.contact_series()
-                for r in reps:
-                    report(r, block)
-                if clock.due():
-                    writer.checkpoint(b.checkpoint_state())
-                    clock.restart()
+                _hand_on(block, reps, watch, detail)
+                _checkpoint_if_due(clock, writer, b)
                 sections.leave()
     except IntegrationError as exc:
         status, err = f"failed: {exc}", str(exc)
@@ -324,6 +318,25 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     if err is not None and raise_errors:
         raise IntegrationError(err)
     return result
+
+
+def _hand_on(block, reps, watch, detail: bool) -> None:
+    """One block to the reporters: its ledger into ``watch`` and, when a writer stores them
+    (``detail``), its per-contact series, each computed once for the block, then the block
+    to every reporter in turn."""
+    watch.update(block.ledger())  # {term: [F]}
+    if detail:
+        block.contact_series()  # {name: [F, n_contacts]}
+    for r in reps:
+        report(r, block)
+
+
+def _checkpoint_if_due(clock, writer, backend) -> None:
+    """The backend's state at its last frame to the writer, when ``clock`` says a checkpoint
+    is due (between blocks: every frame before it has been written)."""
+    if clock.due():
+        writer.checkpoint(backend.checkpoint_state())
+        clock.restart()
 
 
 def _reporters(scene, backend, reporters, keep, out, progress, checkpoint_every, resume):
