@@ -15,7 +15,7 @@ before and after each measurement (the machine is shared: read the timings with 
   ``backend_kernel_cpu``: the kernel calls of the ``backend`` measurement, ``run_cpu``; the
   process's, less sensitive to other processes than wall times), ``process`` (a whole
   ``python -c`` of imports and the run, measured from outside) with ``imports`` and ``setup`` (scene, table, compiled variant
-  loaded) inside it.  Target (issue 18): ``backend <= 1.5 kernel``
+  loaded) inside it.  Target: ``backend <= 1.5 kernel``
   (``backend_over_kernel``, and ``backend_over_kernel_cpu`` from the CPU times).
 * ``ns_per_bead_step``: ``chain.n = N`` (1e4, 1e5, 1e6) of micro-star's law and of
   macro-hertz; each repeat advances a fixed number of bead-steps in one kernel call per frame

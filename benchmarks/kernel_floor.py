@@ -1,4 +1,4 @@
-"""The compiled floor of the fast kernel (issue 18): a hand-written C loop doing the per-step
+"""The compiled floor of the fast kernel: a hand-written C loop doing the per-step
 work of :func:`mdgran.backends.fast_kernel.verlet_pass` (``benchmarks/c_floor/floor.c``),
 built with the system C compiler, beside the numba kernel on the same states.
 

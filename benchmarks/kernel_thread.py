@@ -1,4 +1,4 @@
-"""The fast backend's next kernel call on a thread of its own (issue 18, "output off the
+"""The fast backend's next kernel call on a thread of its own ("output off the
 critical path"): wall time of whole runs (``mdgran.simulation.run`` with an H5MD file) with
 the thread and with every call in line, alternating in one process after a warm-up run each.
 

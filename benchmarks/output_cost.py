@@ -1,4 +1,4 @@
-"""What output costs a long chain (issue 18, "output off the critical path").
+"""What output costs a long chain ("output off the critical path").
 
     python benchmarks/output_cost.py [--n 1000000] [--frames 30] [--head PATH]
 

@@ -1,6 +1,6 @@
 """Where a sweep case's time goes: the CPU time of the paper's sweep cases (``paper-robustness``
 on the fast backend, micro-star to t = 400) in a sweep worker's steady state, split by part,
-for one or two source trees (issue 18: "the 91-case sweep takes what its kernels take").
+for one or two source trees ("the 91-case sweep takes what its kernels take").
 
 Each tree runs in a fresh process (``PYTHONPATH`` = the tree): one warm-up case (imports, the
 compiled kernel's loading; its CPU time is ``first_case_ms``), then cases 40-59, each through

@@ -27,7 +27,7 @@ import numpy as np
 #: name -> (scene, backend, overrides, backend options).  The fast backend in its three modes
 #: (located events with the table, step-quantized events, the exact law instead of the table)
 #: on the four built-in scenes and one hard scene; the reference backend on short runs; the
-#: LAMMPS backend (the hook and the native plugin, whose homogeneous runs issue 17 keeps).
+#: LAMMPS backend (the hook and the native plugin, whose homogeneous runs stay bitwise the same with unlike beads supported).
 CASES = {
     "fast-micro-star": ("micro-star", "fast", {}, {}),
     "fast-macro-hertz": ("macro-hertz", "fast", {}, {}),
@@ -68,7 +68,7 @@ CASES = {
     "lammps-native-k3-micro-star": ("micro-star", "lammps",
                                     {"run.duration": 40.0, "substrate.k3": 0.01},
                                     {"contact": "native"}),
-    # unlike beads (issue 17): the general mixed kernel and the variants that leave out what a
+    # unlike beads: the general mixed kernel and the variants that leave out what a
     # chain does not need; the density-only chains (one law, masses per bead), unit masses,
     # thermal starts and substrate damping, several segments and threads, quantized and exact
     "fast-mixed-dimer": ("mixed/dimer", "fast", {}, {}),

@@ -9,7 +9,7 @@ Modules, one idea each (all nondimensional, bead mass 1, time in 1/q, energy in 
 * :mod:`.maps`: spatio-temporal maps (kinetic energy, relative velocity, cluster boundaries).
 * :mod:`.pulse`: primary pulse speed and the characteristic period ``T_c``.
 * :mod:`.coincidence`: do C_eff peaks coincide with re-clustering-rate peaks?
-* :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives (issue 14).
+* :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives.
 
 :func:`run_summary` condenses a run into scalars for :mod:`mdgran.sweep`.  The functions of a
 whole run take a :class:`~mdgran.run_record.Run` (its scene, contact states and events come

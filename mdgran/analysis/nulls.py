@@ -1,4 +1,4 @@
-"""Null models for the Fig. 7 relation and a selection-free alternative (issue 14).
+"""Null models for the Fig. 7 relation and a selection-free alternative.
 
 **Fig. 7** (paper Sec. VI): each case contributes one point, the segment with the largest mean
 ``C_eff / C_+`` (:func:`~.clusters.representative_segment`) at ``x = log10 r_m`` (its

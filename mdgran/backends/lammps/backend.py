@@ -48,7 +48,7 @@ compiled (:mod:`mdgran.backends.lammps.hook`, numba):
   (tests/test_lammps_plugin.py, tests/test_lammps_hook.py).  Events, ``D_hysteresis`` and
   ``D_viscous`` are read back from the fix; its per-contact states are per-atom data that
   migrate with the atoms, and with MPI each rank updates the contacts of its own atoms.
-* **Unlike beads, strikers, substrate damping, thermal velocities** (issue 17): the hook's
+* **Unlike beads, strikers, substrate damping, thermal velocities**: the hook's
   :class:`~mdgran.backends.lammps.hook.HookMix` and the fix's ``mixture FILE`` and
   ``sub_damping C`` give each contact its pair's law ``A f(delta / L)`` and each bead its mass
   and substrate factor; LAMMPS's integrator gets the masses as per-atom masses (``fix
