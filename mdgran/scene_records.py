@@ -6,7 +6,7 @@ A record has one field per key of its section, in the schema's order, typed afte
 kind (``int``, ``float``, ``str``, ``bool``; ``| None`` where the key may be absent; a number
 or a tuple of numbers for the per-bead keys); ``record.table()`` is the section as a table,
 key -> value, for the functions that take one.  Records are immutable: assigning a field raises
-:class:`dataclasses.FrozenInstanceError`, and a list value of the scene's data (per-bead
+``dataclasses.FrozenInstanceError``, and a list value of the scene's data (per-bead
 ratios, ``base.values``) is held as a tuple.  A key that is a Python keyword gets a trailing
 underscore: ``contact.lambda`` is ``scene.contact.lambda_``.  Records are built from
 ``Scene.data`` when the scene is made; ``data`` stays what is written into output files and
