@@ -97,7 +97,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
-                              schwarz_mean_force, schwarz_mean_force_of_branch,
+                              schwarz_mean_force_of_branch,
                               spline_cubic)
 
 # status codes (counters.status)
@@ -556,17 +556,6 @@ def delta_off_at(params, j):
 
 
 @njit(inline="always")
-def mean_force_at(flags, params, j, d0, d1):
-    """Mean force of contact j over [d0, d1] (:func:`schwarz_mean_force`, scaled)."""
-    if not flags[MIXED]:
-        return schwarz_mean_force(d0, d1, params.law)
-    k = params.mix.kind[j]
-    il = pair_at(params, k, P_INV_LEN)
-    law = class_law(params.mix, k)
-    return pair_at(params, k, P_SCALE) * schwarz_mean_force(d0 * il, d1 * il, law)
-
-
-@njit(inline="always")
 def memo_branch(memo, j, u, law):
     """``branch_t(u)`` of contact j's law, taken from ``memo[j]`` when it holds u (the same
     number: the inversion is a function of u alone)."""
@@ -577,10 +566,12 @@ def memo_branch(memo, j, u, law):
 
 @njit(inline="always")
 def memo_mean_force(flags, params, j, d0, d1, memo):
-    """:func:`mean_force_at` of contact j over [d0, d1], bit for bit, its start's branch
-    inversion (seven Newton steps) taken from ``memo`` when the last one of contact j was
-    there: a kicked contact's end of one step is its start of the next.  Its end's goes into
-    ``memo[j]``.  A contact's memo is read and written by the one segment that owns it."""
+    """Mean force of contact j over [d0, d1] (:func:`~mdgran.contact_scalar.schwarz_mean_force`,
+    scaled for unlike beads), its start's branch inversion (seven Newton steps) taken from
+    ``memo`` when the last one of contact j was there (the same number): a kicked contact's end
+    of one step is its start of the next.  Its end's goes into ``memo[j]``.  A contact's memo
+    is read and written by the one segment that owns it, or by the event windows, stepped one
+    after another after the pass."""
     law, u0, u1, scale = params.law, d0, d1, 1.0
     if flags[MIXED]:
         k = params.mix.kind[j]
@@ -1359,10 +1350,11 @@ def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
 
 
 @njit(cache=True)
-def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi):
+def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi, memo):
     """One Verlet (sub)step of length h from ``cur`` into ``nxt`` of the window of beads
     lo .. hi: its beads stepped as the pass steps them (mean-force kick near snap-off
-    included), its neighbours along their parabolas (acceleration unchanged).  Returns
+    included; ``memo``: :func:`memo_mean_force`), its neighbours along their parabolas
+    (acceleration unchanged).  Returns
     (damping power of the window at the end, the forces of its left and right edge
     contacts, which edge is closed in the mean-force band (1 left, 2 right, 3 both), status,
     its contact)."""
@@ -1393,7 +1385,7 @@ def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi):
                     band |= edge
                 else:
                     d0 = across(walls, cur.x, j) - params.gap
-                    fv = (2.0 * mean_force_at(flags, params, j, d0, d)
+                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo)
                           - force_at(flags, params, j, d0)[0])
             if flags[DAMPED]:
                 f += params.damping * r
@@ -1477,7 +1469,7 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     while True:
         cur, nxt = copies[c], copies[1 - c]
         p1, f_l, f_r, band, status, bad = window_pass(flags, params, cur, nxt, ks.closed, h,
-                                                      t0 + done, lo, hi)
+                                                      t0 + done, lo, hi, ks.seg.branch)
         if first:
             p_pass, first = p1, False  # the window's share of the whole pass's power
         if status != OK:
