@@ -1,6 +1,6 @@
 // mdgran: fix mdgran/chain, the hysteretic adhesive contact of a 1-D bead chain, in C++.
 //
-// The native twin of the Python hook of mdgran/backends/lammps.py (fix external pf/callback):
+// The native twin of the Python hook of mdgran/backends/lammps/backend.py (fix external pf/callback):
 // same law, same step-quantized switching, same floating-point operations in the same order,
 // so that the two agree to round-off ("events quantized", the default).  With "events located"
 // the fix integrates the chain itself and locates each contact event inside the step, as
@@ -27,7 +27,7 @@
 //     integrate yes|no (quantized: the fix also moves the atoms of its group that are not walls
 //            along x with fix nve's velocity Verlet, the same operations, in place of fix nve;
 //            default no)
-//     mixture FILE (unlike beads, mdgran.backends.native_plugin.write_mixture: by atom tag the bead's
+//     mixture FILE (unlike beads, mdgran.backends.lammps.plugin.write_mixture: by atom tag the bead's
 //            1/m and substrate factor g, and for the contact to its right its scales A, 1/L,
 //            L, threshold L delta_off and law class, each class with its fc and table: the
 //            contact's force A f(delta / L), energy A L V(delta / L); a bead's acceleration
@@ -37,7 +37,7 @@
 //            the contact damping; its power is added to D_viscous; default 0)
 //     pulse TAG A T t0 (four values: a half-sine force A sin(pi (t - t0) / T) on the atom with
 //            tag TAG for t0 <= t <= t0 + T; mdgran/drive.py; default: none)
-//     base FILE (a base motion u_b(t) under the substrate, mdgran.backends.native_plugin.write_base:
+//     base FILE (a base motion u_b(t) under the substrate, mdgran.backends.lammps.plugin.write_base:
 //            its piecewise cubics on a uniform grid; the substrate then acts on u - u_b and
 //            w - u_b', the walls stay at 0; default: none)
 //   k1, k3, damping, sub_damping, tether, gap and lambda must be finite and >= 0: anything else
@@ -472,7 +472,7 @@ std::string MdgranLaw::read_table(const char *file)
   return "";
 }
 
-// The unlike beads of "mixture FILE" (written by mdgran/backends/lammps.py): keyword lines
+// The unlike beads of "mixture FILE" (written by mdgran/backends/lammps/backend.py): keyword lines
 //   MDGRAN_MIXTURE,  ntags N,  classes C,  class K fc VALUE [table FILE]  (C of them),  tags
 // then N lines "tag 1/m g A 1/L L delta_off class" (numbers with 17 digits: exact round trip).
 // Every class has the chain's kind (hertz or not) and snap-off rule, and its own fc and table.
@@ -529,7 +529,7 @@ void FixMdgranChain::read_mixture(const char *file)
   mixed = 1;
 }
 
-// The base motion of mdgran.backends.native_plugin.write_base: "MDGRAN_BASE", "step h", "rows n", then
+// The base motion of mdgran.backends.lammps.plugin.write_base: "MDGRAN_BASE", "step h", "rows n", then
 // n rows of 4 coefficients (highest power first), numbers as repr (exact)
 void FixMdgranChain::read_base(const char *file)
 {

@@ -1,5 +1,5 @@
 // mdgran: registration of fix mdgran/chain as a LAMMPS plugin ("plugin load mdgranplugin.so").
-// Built by mdgran/backends/native_plugin.py, which defines MDGRAN_LAMMPS_VERSION (the version string of
+// Built by mdgran/backends/lammps/plugin.py, which defines MDGRAN_LAMMPS_VERSION (the version string of
 // the LAMMPS whose headers it compiled against, e.g. "22 Jul 2025").
 #include "lammpsplugin.h"
 
@@ -26,6 +26,6 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
   (*register_plugin)(&plugin, lmp);
 }
 
-// Version the plugin was compiled for: mdgran/backends/native_plugin.py compares it with the LAMMPS that
+// Version the plugin was compiled for: mdgran/backends/lammps/plugin.py compares it with the LAMMPS that
 // loads it (LAMMPS itself only prints a note on a mismatch, and the class layouts may differ).
 extern "C" const char *mdgran_plugin_lammps_version() { return MDGRAN_LAMMPS_VERSION; }
