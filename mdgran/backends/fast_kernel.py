@@ -38,9 +38,11 @@ whose edge contact switches inside the step, or is closed in the mean-force band
 that neighbour and is stepped again; one that reaches a window already stepped is joined with
 it, and the step's windows are stepped again (rare).  The damping power's trapezoid is the
 whole step's, with each window's own sub-steps in place of its share.  The cost is a few
-passes over a few beads per event, whatever the chain's length, and the windows are stepped
-in order along the chain after the (possibly threaded) pass: the result does not depend on
-the thread count.  A contact that sits on its switching point after a switch (DMT, Hertz:
+passes over a few beads per event, whatever the chain's length.  A window's result depends
+on its beads and contacts alone (it starts from the step's counters and chatter guard, and
+keeps its events apart), so the windows are stepped in :data:`LANES` lanes, on the threads
+in a threaded variant, and merged in order along the chain (events, hysteresis losses,
+chatter guard): the result does not depend on the thread count.  A contact that sits on its switching point after a switch (DMT, Hertz:
 ``delta_off = 0``) is switched back at once if it moves outward (the reference's settle
 rule); more than ``MAX_SWITCHES`` switches of one contact at one instant stop the run
 (chatter).
@@ -72,8 +74,8 @@ A threaded variant (``Flags.threaded``) runs the segments on numba's threads
 (``prange``); since the cut depends on the chain alone, the result does not depend on the
 thread count, bitwise.  Against one segment (a chain of at most SEGMENT contacts is one),
 only the damping power is summed in another order: positions, velocities, states and events
-are bitwise the same, ``D_viscous`` agrees to round-off.  Event windows, switching and
-settling stay serial (rare).
+are bitwise the same, ``D_viscous`` agrees to round-off.  The event windows are stepped in
+lanes after the pass, on the threads too when a step has many (:func:`local_events`).
 
 **Records** (numba named tuples and one structured record, so that each function takes a
 few arguments that say what they are): :class:`Flags` (the variant), :class:`Params` (the
@@ -271,12 +273,13 @@ class Beads(NamedTuple):
 
 
 class EventLog(NamedTuple):
-    """Events of the run so far: time, contact index, kind (1 close, 0 open); the count is
-    ``counters.events``."""
+    """Events of the run so far: time, contact index, kind (1 close, 0 open), hysteresis loss
+    (``V(delta)`` on opening, 0 on closing); the count is ``counters.events``."""
 
     time: np.ndarray
     contact: np.ndarray
     kind: np.ndarray
+    loss: np.ndarray
 
 
 # columns of Segments.real and Segments.ints
@@ -306,19 +309,59 @@ class Segments(NamedTuple):
     #                     (:func:`memo_mean_force`)
 
 
+#: Columns of KernelState.windows, one row per event window of a step: its first and last
+#: bead; whether it is to be stepped (again); the sides it must grow by (1 left, 2 right);
+#: the lane that stepped it, its first event there and its count; its sub-steps; its status
+#: and the contact that concerns.
+(W_LO, W_HI, W_TODO, W_GROW, W_LANE, W_FIRST, W_EVENTS, W_SUBSTEPS, W_STATUS,
+ W_BAD) = range(10)
+#: Columns of KernelState.window_sums: what a window adds to the step's trapezoid of the
+#: damping power, to its end power and to the excitations' work; the time of its failure.
+S_VISCOUS, S_POWER, S_WORK, S_BAD_TIME = range(4)
+#: Event windows are stepped in LANES lanes, lane g taking windows g * count // LANES ..
+#: (g + 1) * count // LANES - 1 of the step's count: a number that depends on nothing else, so
+#: that which windows share a lane's event buffer does not depend on the thread count.
+LANES = 8
+#: a threaded variant steps its lanes on the threads when a step has at least this many
+#: windows (waking them costs ~10 us)
+PARALLEL_WINDOWS = 16
+
+
+class Lanes(NamedTuple):
+    """The event windows' lanes (:func:`step_lane`): what stepping a window changes besides
+    the beads and its contacts' states, one row per lane."""
+
+    counters: np.ndarray  # [LANES] COUNTERS: a window's own (status, events, chatter guard)
+    log: EventLog  # [LANES, capacity] each lane's events of the step, window after window
+    switching: np.ndarray  # [LANES, FLAG_CAP] contacts switching at the located event time
+    chatter: np.ndarray  # [LANES, CHAT_CAP, 2] the chatter guard's (contact, switches)
+
+
+class Lane(NamedTuple):
+    """One lane's view (:class:`Lanes` row, and what the windows share) as the switching
+    functions take it, in place of a :class:`KernelState`."""
+
+    closed: np.ndarray  # [m] the chain's contact states (a window switches its own)
+    counters: np.ndarray  # [1] COUNTERS
+    log: EventLog
+    switching: np.ndarray  # [FLAG_CAP]
+    chatter: np.ndarray  # [CHAT_CAP, 2]
+    memo: np.ndarray  # Segments.branch (a window writes its own contacts' rows)
+    local: Beads  # [2, n] the sub-steps of the windows (each its own beads)
+
+
 class KernelState(NamedTuple):
     """Everything the kernel updates in place besides the beads."""
 
     closed: np.ndarray  # [m] bool: contact states
     counters: np.ndarray  # one record of dtype COUNTERS
     log: EventLog
-    switching: np.ndarray  # [FLAG_CAP] contacts switching at the located event time
     chatter: np.ndarray  # [CHAT_CAP, 2] (contact, switches) at the current instant
     seg: Segments  # the pass's segments
     local: Beads  # [2, n] the sub-steps of an event window (:func:`resolve_window`)
-    windows: np.ndarray  # [m, 2] int64 first and last bead of each event window of a step
-    saved: np.ndarray  # [2] COUNTERS: the counters before a step's windows, before one window
-    saved_chatter: np.ndarray  # [2, CHAT_CAP, 2] KernelState.chatter saved with them
+    windows: np.ndarray  # [m, 10] int64 the event windows of a step (columns W_*)
+    window_sums: np.ndarray  # [m, 4] their sums (columns S_*)
+    lanes: Lanes
 
 
 class FrameBlock(NamedTuple):
@@ -401,14 +444,28 @@ def new_state(n: int, n_contacts: int, event_capacity: int,
     counters = np.zeros(1, dtype=COUNTERS)
     counters["chatter_time"] = -1.0
     counters["front_lo"] = -1
-    log = EventLog(np.zeros(event_capacity), np.zeros(event_capacity, dtype=np.int64),
-                   np.zeros(event_capacity, dtype=np.int8))
     seg = new_segments(n_contacts, segment)
     local = Beads(np.zeros((2, n)), np.zeros((2, n)), np.zeros((2, n)))
-    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, log,
-                       np.zeros(FLAG_CAP, dtype=np.int64), np.zeros((CHAT_CAP, 2), dtype=np.int64),
-                       seg, local, np.zeros((max(n_contacts, 1), 2), dtype=np.int64),
-                       np.zeros(2, dtype=COUNTERS), np.zeros((2, CHAT_CAP, 2), dtype=np.int64))
+    rows = max(n_contacts, 1)
+    return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, new_log(event_capacity),
+                       np.zeros((CHAT_CAP, 2), dtype=np.int64), seg, local,
+                       np.zeros((rows, 10), dtype=np.int64), np.zeros((rows, 4)),
+                       new_lanes(event_capacity // 2))
+
+
+def new_log(capacity: int, lanes: tuple = ()) -> EventLog:
+    """An empty :class:`EventLog` of ``capacity`` events (``lanes + (capacity,)`` arrays)."""
+    shape = (*lanes, capacity)
+    return EventLog(np.zeros(shape), np.zeros(shape, dtype=np.int64),
+                    np.zeros(shape, dtype=np.int8), np.zeros(shape))
+
+
+def new_lanes(capacity: int) -> Lanes:
+    """:class:`Lanes` whose event buffers hold ``capacity`` events each (the pages are touched
+    only as far as a step's events reach)."""
+    return Lanes(np.zeros(LANES, dtype=COUNTERS), new_log(capacity, (LANES,)),
+                 np.zeros((LANES, FLAG_CAP), dtype=np.int64),
+                 np.zeros((LANES, CHAT_CAP, 2), dtype=np.int64))
 
 
 # ---- geometry and the force of a closed contact -------------------------------------------
@@ -565,13 +622,15 @@ def memo_branch(memo, j, u, law):
 
 
 @njit(inline="always")
-def memo_mean_force(flags, params, j, d0, d1, memo):
+def memo_mean_force(flags, params, j, d0, d1, memo, keep):
     """Mean force of contact j over [d0, d1] (:func:`~mdgran.contact_scalar.schwarz_mean_force`,
     scaled for unlike beads), its start's branch inversion (seven Newton steps) taken from
     ``memo`` when the last one of contact j was there (the same number): a kicked contact's end
-    of one step is its start of the next.  Its end's goes into ``memo[j]``.  A contact's memo
-    is read and written by the one segment that owns it, or by the event windows, stepped one
-    after another after the pass."""
+    of one step is its start of the next.  Its end's goes into ``memo[j]`` if ``keep``.  A
+    contact's memo is written by the one segment that owns it, or by the one event window
+    that holds it; a window's neighbour bead reads its other contact's memo without writing
+    it (two windows may share that contact).  Whether it is written changes no result, only
+    the time."""
     law, u0, u1, scale = params.law, d0, d1, 1.0
     if flags[MIXED]:
         k = params.mix.kind[j]
@@ -580,7 +639,8 @@ def memo_mean_force(flags, params, j, d0, d1, memo):
                                                                                   P_SCALE)
     t0 = memo_branch(memo, j, u0, law)
     t1 = branch_t(u1, law.sigma, law.t_min, law.delta_min)
-    memo[j, 0], memo[j, 1] = u1, t1
+    if keep:
+        memo[j, 0], memo[j, 1] = u1, t1
     f = schwarz_mean_force_of_branch(t0, t1, law)
     return scale * f if flags[MIXED] else f
 
@@ -601,8 +661,9 @@ def fail(counters, status, j):
 
 
 @njit(cache=True)
-def record_event(ks, j, t, kind):
-    """Append event (t, contact index j, kind 1 close / 0 open) to the log."""
+def record_event(ks, j, t, kind, loss):
+    """Append event (t, contact index j, kind 1 close / 0 open, hysteresis loss) to the
+    log."""
     counters = ks.counters[0]
     k = counters.events
     if k >= ks.log.time.shape[0]:
@@ -611,6 +672,7 @@ def record_event(ks, j, t, kind):
     ks.log.time[k] = t
     ks.log.contact[k] = j
     ks.log.kind[k] = kind
+    ks.log.loss[k] = loss
     counters.events = k + 1
 
 
@@ -737,10 +799,10 @@ def predicted(old, b, h):
 
 
 @njit(cache=True)
-def pass_force(flags, params, old, closed, h, j, memo):
+def pass_force(flags, params, old, closed, h, j, memo, keep):
     """``(F, Fv)`` of contact j at the end of the pass of length h from ``old`` (the force,
     and the force the beads' velocity kick uses: :func:`segment_pass`'s ``f`` and ``fv``),
-    by the pass's operations (``memo``: :func:`memo_mean_force`)."""
+    by the pass's operations (``memo``, ``keep``: :func:`memo_mean_force`)."""
     walls = flags[WALLS]
     n = old.x.shape[0]
     rshift = 0 if walls else 1
@@ -758,8 +820,8 @@ def pass_force(flags, params, old, closed, h, j, memo):
     fv = f
     if in_kick_band(flags, params, j, d):
         d0 = across(walls, old.x, j) - params.gap
-        fv = 2.0 * memo_mean_force(flags, params, j, d0, d, memo) - force_at(flags, params,
-                                                                             j, d0)[0]
+        fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo, keep)
+              - force_at(flags, params, j, d0)[0])
     if flags[DAMPED]:
         f += params.damping * r
         fv += params.damping * r
@@ -798,7 +860,7 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick_fv, row, j0,
     prev, fv_prev = -2, 0.0  # the last kicked contact and its Fv
     for k in range(count):
         j = kicked[row + k]
-        fv = pass_force(flags, params, old, closed, h, j, memo)[1]
+        fv = pass_force(flags, params, old, closed, h, j, memo, True)[1]
         if j == j0:
             fv_first = fv
         if j == j1 - 1:
@@ -980,9 +1042,11 @@ def log_switches(ks, s):
     first = s * seg.size
     for k in range(first, first + seg.ints[s, I_SWITCHES]):
         j = seg.ev_contact[k]
+        loss = 0.0
         if not ks.closed[j]:
-            counters.d_hysteresis += seg.ev_real[k, 1]
-        record_event(ks, j, seg.ev_real[k, 0], 1 if ks.closed[j] else 0)
+            loss = seg.ev_real[k, 1]
+            counters.d_hysteresis += loss
+        record_event(ks, j, seg.ev_real[k, 0], 1 if ks.closed[j] else 0, loss)
 
 
 @njit
@@ -1163,12 +1227,13 @@ def switch(flags, params, j, t, beads, ks):
         if flags[DAMPED]:
             f_old += c * r
             counters.power -= c * r * r
-        counters.d_hysteresis += energy_at(flags, params, j, d)
+        loss = energy_at(flags, params, j, d)
+        counters.d_hysteresis += loss
         closed[j] = False
-        record_event(ks, j, t, 0)
+        record_event(ks, j, t, 0, loss)
     else:
         closed[j] = True
-        record_event(ks, j, t, 1)
+        record_event(ks, j, t, 1, 0.0)
         f_new, ok = force_at(flags, params, j, d)
         if not ok:
             fail(counters, OUT_OF_TABLE, j)
@@ -1295,10 +1360,10 @@ def find_windows(walls, params, old, x_new, h, ks):
                 continue
             left, right = beads_of(walls, j)
             left, right = max(left, 0), min(right, n - 1)
-            if count > 0 and left <= win[count - 1, 1] + 2:
-                win[count - 1, 1] = max(win[count - 1, 1], right)
+            if count > 0 and left <= win[count - 1, W_HI] + 2:
+                win[count - 1, W_HI] = max(win[count - 1, W_HI], right)
             else:
-                win[count, 0], win[count, 1] = left, right
+                win[count, W_LO], win[count, W_HI], win[count, W_TODO] = left, right, 1
                 count += 1
     return count
 
@@ -1385,7 +1450,7 @@ def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi, memo):
                     band |= edge
                 else:
                     d0 = across(walls, cur.x, j) - params.gap
-                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo)
+                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo, True)
                           - force_at(flags, params, j, d0)[0])
             if flags[DAMPED]:
                 f += params.damping * r
@@ -1422,13 +1487,13 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     im, g = bead_factors(flags, params, b)
     if window_left:  # the edge is b's left contact: +F on b
         jo = b - s + 1
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo)
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo, False)
                    if jo < closed.shape[0] else (0.0, 0.0))
         f, fv, dj = f_edge - fo, f_edge - fvo, impulse
     else:  # the edge is b's right contact: -F on b
         jo = b - s
-        fo, fvo = pass_force(flags, params, old, closed, h, jo, memo) if jo >= 0 else (0.0,
-                                                                                      0.0)
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo, False) if jo >= 0
+                   else (0.0, 0.0))
         f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
     a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
     new.x[b] = x
@@ -1439,7 +1504,7 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
 
 
 @njit(cache=True)
-def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
+def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
     """Step the window of beads lo .. hi from ``old`` (time t0) through its events to t0 +
     dt, as the whole chain was once stepped (:func:`window_pass` to the earliest root te of
     its contacts, the contacts switch there, the rest of the step in the new state, repeated),
@@ -1449,7 +1514,9 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     nothing written) when an edge contact switches in the step or is closed in the mean-force
     band: the window must take in that neighbour.  Else ``viscous`` and ``work`` are what the
     window's sub-steps add to the step's trapezoids of the damping power and of the
-    excitations' power (:func:`external_power`), ``power`` what they add to its end."""
+    excitations' power (:func:`external_power`), ``power`` what they add to its end.
+    Its switches, events and counters go to ``lane`` (:class:`Lane`)."""
+    ks = lane
     counters = ks.counters[0]
     walls = flags[WALLS]
     n, m = old.x.shape[0], ks.closed.shape[0]
@@ -1469,7 +1536,7 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     while True:
         cur, nxt = copies[c], copies[1 - c]
         p1, f_l, f_r, band, status, bad = window_pass(flags, params, cur, nxt, ks.closed, h,
-                                                      t0 + done, lo, hi, ks.seg.branch)
+                                                      t0 + done, lo, hi, ks.memo)
         if first:
             p_pass, first = p1, False  # the window's share of the whole pass's power
         if status != OK:
@@ -1527,96 +1594,179 @@ def resolve_window(flags, params, old, new, ks, lo, hi, t0, dt):
     t1 = t0 + dt
     if edge_l >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, lo - 1, fs_l,
-                         j_l - 0.5 * dt * (f0_l + fs_l), False, ks.seg.branch)
+                         j_l - 0.5 * dt * (f0_l + fs_l), False, ks.memo)
     if edge_r >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, hi + 1, fs_r,
-                         j_r - 0.5 * dt * (f0_r + fs_r), True, ks.seg.branch)
+                         j_r - 0.5 * dt * (f0_r + fs_r), True, ks.memo)
     return (0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass,
             work - 0.5 * dt * (e_start + e_state))
 
 
 @njit(cache=True)
-def save_counters(ks, k):
-    """Save what stepping a window changes besides the beads (slot k of ``ks.saved``)."""
-    c, s = ks.counters[0], ks.saved[k]
-    s.events, s.d_hysteresis, s.power, s.substeps = c.events, c.d_hysteresis, c.power, c.substeps
-    s.chatter_time, s.chatter_count = c.chatter_time, c.chatter_count
-    for i in range(CHAT_CAP):
-        ks.saved_chatter[k, i, 0], ks.saved_chatter[k, i, 1] = ks.chatter[i, 0], ks.chatter[i, 1]
-
-
-@njit(cache=True)
-def restore_counters(ks, k):
-    """Undo every window stepped since :func:`save_counters` (k): the contacts switched since
-    (each switch is one event in the log) back, the counters and the chatter guard."""
-    c, s = ks.counters[0], ks.saved[k]
-    for e in range(c.events - 1, s.events - 1, -1):
-        j = ks.log.contact[e]
-        ks.closed[j] = not ks.closed[j]
-    c.events, c.d_hysteresis, c.power, c.substeps = s.events, s.d_hysteresis, s.power, s.substeps
-    c.chatter_time, c.chatter_count = s.chatter_time, s.chatter_count
-    for i in range(CHAT_CAP):
-        ks.chatter[i, 0], ks.chatter[i, 1] = ks.saved_chatter[k, i, 0], ks.saved_chatter[k, i, 1]
-
-
-@njit(cache=True)
-def drop_window(win, k, count):
+def drop_window(ks, k, count):
     """Remove window k of ``count`` (rows after it move up; a loop: the kernel allocates
     nothing, since its loop runs without numba's reference counting); returns the count."""
+    win, sums = ks.windows, ks.window_sums
     for i in range(k, count - 1):
-        win[i, 0], win[i, 1] = win[i + 1, 0], win[i + 1, 1]
+        for c in range(win.shape[1]):
+            win[i, c] = win[i + 1, c]
+        for c in range(sums.shape[1]):
+            sums[i, c] = sums[i + 1, c]
     return count - 1
 
 
 @njit(cache=True)
-def widen(win, k, count, grow):
-    """Window k widened by a bead on the side(s) ``grow`` asks, joined with the windows after
-    it that it comes within two beads of; returns the new count."""
-    if grow & 1:
-        win[k, 0] -= 1
-    if grow & 2:
-        win[k, 1] += 1
-    while k + 1 < count and win[k + 1, 0] <= win[k, 1] + 2:
-        win[k, 1] = max(win[k, 1], win[k + 1, 1])
-        count = drop_window(win, k + 1, count)
-    return count
+def lane_view(closed, memo, local, lanes, g):
+    """Lane g of ``lanes`` as a :class:`Lane`."""
+    log = lanes.log
+    return Lane(closed, lanes.counters[g:g + 1],
+                EventLog(log.time[g], log.contact[g], log.kind[g], log.loss[g]),
+                lanes.switching[g], lanes.chatter[g], memo, local)
 
 
 @njit(cache=True)
-def local_events(flags, params, old, new, t0, dt, ks):
-    """The events of the step from ``old`` (t0) whose pass is in ``new``, each window of them
-    stepped alone (:func:`find_windows`, :func:`resolve_window`) in order along the chain.  A
-    window that must take in a neighbour is undone, widened and stepped again; one that comes
-    within two beads of the window before it is joined with it, and the step's windows are
-    all stepped again (rare).  Returns what the windows add to the step's trapezoid of the
-    damping power, to its end power and to its trapezoid of the excitations' power, and
-    their count (``ks.windows``)."""
+def step_window(flags, params, old, new, counters, chatter, lane, windows, sums, k, g, t0,
+                dt):
+    """Window k (row k of ``KernelState.windows`` and ``.window_sums``) stepped by lane g
+    (:func:`resolve_window`).  The lane starts from the step's ``counters`` and chatter guard,
+    so that a window's result depends on nothing another window does.  A window that must
+    grow takes back its switches."""
+    c = lane.counters[0]
+    first = c.events
+    c.status, c.substeps = OK, 0
+    c.power, c.d_hysteresis = counters.power, counters.d_hysteresis
+    c.chatter_time, c.chatter_count = counters.chatter_time, counters.chatter_count
+    for i in range(counters.chatter_count):
+        lane.chatter[i, 0], lane.chatter[i, 1] = chatter[i, 0], chatter[i, 1]
+    grow, dv, dp, dw = resolve_window(flags, params, old, new, lane, windows[k, W_LO],
+                                      windows[k, W_HI], t0, dt)
+    if grow and c.status == OK:
+        for e in range(c.events - 1, first - 1, -1):
+            j = lane.log.contact[e]
+            lane.closed[j] = not lane.closed[j]
+        c.events = first
+    windows[k, W_TODO], windows[k, W_GROW], windows[k, W_LANE] = 0, grow, g
+    windows[k, W_FIRST], windows[k, W_EVENTS] = first, c.events - first
+    windows[k, W_SUBSTEPS], windows[k, W_STATUS], windows[k, W_BAD] = (c.substeps, c.status,
+                                                                        c.bad_contact)
+    sums[k, S_VISCOUS], sums[k, S_POWER], sums[k, S_WORK] = dv, dp, dw
+    sums[k, S_BAD_TIME] = c.bad_time
+
+
+@njit(cache=True)
+def step_lane(flags, params, old, new, shared, lanes, g, count, t0, dt):
+    """The windows of lane g (:data:`LANES`) still to be stepped, of the step's ``count``.
+    Every argument that is written is an array or a plain tuple of arrays (``new``:
+    ``(x, v, a)``; ``shared``: the :class:`KernelState`'s ``(closed, counters, chatter,
+    Segments.branch, local x, v, a, windows, window_sums)``; ``lanes``: :class:`Lanes`'
+    arrays, the log's flattened): numba's parallel loop (``run_lanes``) drops writes made
+    through a record built inside it."""
+    closed, counters, chatter, memo, lx, lv, la, windows, sums = shared
+    lc, time, contact, kind, loss, switching, lchat = lanes
+    view = lane_view(closed, memo, Beads(lx, lv, la),
+                     Lanes(lc, EventLog(time, contact, kind, loss), switching, lchat), g)
+    out = Beads(new[0], new[1], new[2])
+    for k in range(g * count // LANES, (g + 1) * count // LANES):
+        if windows[k, W_TODO]:
+            step_window(flags, params, old, out, counters[0], chatter, view, windows, sums,
+                        k, g, t0, dt)
+
+
+@njit(cache=True)
+def undo_window(ks, k):
+    """Take back window k's switches (its events, in its lane, last first)."""
+    win, log = ks.windows, ks.lanes.log
+    g, first = win[k, W_LANE], win[k, W_FIRST]
+    for e in range(first + win[k, W_EVENTS] - 1, first - 1, -1):
+        j = log.contact[g, e]
+        ks.closed[j] = not ks.closed[j]
+    win[k, W_EVENTS] = 0
+
+
+@njit(cache=True)
+def regroup(ks, count):
+    """After the lanes stepped the windows to do: each window that must take in a neighbour
+    grows by it, and windows within two beads of each other are joined (the switches of a
+    stepped one taken back); those are to be stepped again.  Returns the new count and
+    whether any is (none when a window failed: the step stops)."""
     win = ks.windows
-    count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
-    save_counters(ks, 0)
-    viscous, power, work, k = 0.0, 0.0, 0.0, 0
-    while k < count:
-        save_counters(ks, 1)
-        grow, dv, dp, dw = resolve_window(flags, params, old, new, ks, win[k, 0], win[k, 1],
-                                          t0, dt)
-        if ks.counters[0].status != OK:
-            return 0.0, 0.0, 0.0, 0
-        if grow == 0:
-            viscous += dv
-            power += dp
-            work += dw
+    for k in range(count):
+        if win[k, W_STATUS] != OK:
+            return count, False
+    again = False
+    for k in range(count):
+        grow = win[k, W_GROW]
+        if grow:
+            win[k, W_LO] -= 1 if grow & 1 else 0
+            win[k, W_HI] += 1 if grow & 2 else 0
+            win[k, W_GROW], win[k, W_TODO] = 0, 1
+            ks.counters[0].widened += 1
+            again = True
+    k = 0
+    while k + 1 < count:
+        if win[k + 1, W_LO] > win[k, W_HI] + 2:
             k += 1
             continue
-        restore_counters(ks, 1)
-        ks.counters[0].widened += 1
-        count = widen(win, k, count, grow)
-        if k > 0 and win[k, 0] <= win[k - 1, 1] + 2:  # reaches a window already stepped
-            win[k - 1, 1] = win[k, 1]
-            count = widen(win, k - 1, drop_window(win, k, count), 0)
-            restore_counters(ks, 0)
-            viscous, power, work, k = 0.0, 0.0, 0.0, 0
-    ks.counters[0].windows += count
+        for i in (k, k + 1):
+            if not win[i, W_TODO]:
+                undo_window(ks, i)
+        win[k, W_HI] = max(win[k, W_HI], win[k + 1, W_HI])
+        win[k, W_TODO] = 1
+        count = drop_window(ks, k + 1, count)
+        again = True
+    return count, again
+
+
+@njit(cache=True)
+def merge_windows(ks, count):
+    """The step's windows in order along the chain, as if stepped one after another: their
+    events into the log (hysteresis losses added and the chatter guard counted in that
+    order), their sub-steps counted, the first failure recorded; returns what they add to the
+    step's damping-power trapezoid, end power and excitations' work, and their count."""
+    counters, win, sums, log = ks.counters[0], ks.windows, ks.window_sums, ks.lanes.log
+    viscous, power, work = 0.0, 0.0, 0.0
+    for k in range(count):
+        g = win[k, W_LANE]
+        for e in range(win[k, W_FIRST], win[k, W_FIRST] + win[k, W_EVENTS]):
+            j, t, kind, loss = log.contact[g, e], log.time[g, e], log.kind[g, e], log.loss[g, e]
+            if kind == 0:
+                counters.d_hysteresis += loss
+            record_event(ks, j, t, kind, loss)
+            count_switch(ks, j, t)
+            if counters.status != OK:
+                counters.bad_time = t
+                return 0.0, 0.0, 0.0, 0
+        counters.substeps += win[k, W_SUBSTEPS]
+        if win[k, W_STATUS] != OK:
+            fail(counters, win[k, W_STATUS], win[k, W_BAD])
+            counters.bad_time = sums[k, S_BAD_TIME]
+            return 0.0, 0.0, 0.0, 0
+        viscous += sums[k, S_VISCOUS]
+        power += sums[k, S_POWER]
+        work += sums[k, S_WORK]
+    counters.windows += count
     return viscous, power, work, count
+
+
+@njit(inline="always")
+def local_events(flags, params, old, new, t0, dt, ks, run_lanes):
+    """The events of the step from ``old`` (t0) whose pass is in ``new``, each window of them
+    stepped alone (:func:`find_windows`, :func:`resolve_window`) by the lanes
+    (``run_lanes``: on the threads in a threaded variant); a window that must take in a
+    neighbour grows, one that comes within two beads of another is joined with it, and
+    those are stepped again (:func:`regroup`; rare).  A window's result depends on its beads
+    and contacts alone and the windows are merged in order along the chain
+    (:func:`merge_windows`): the result does not depend on the thread count.  Returns what
+    the windows add to the step's trapezoid of the damping power, to its end power and to its
+    trapezoid of the excitations' power, and their count."""
+    count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
+    for g in range(LANES):
+        ks.lanes.counters[g].events = 0
+    again = True
+    while again:
+        run_lanes(params, old, new, t0, dt, ks, count)
+        count, again = regroup(ks, count)
+    return merge_windows(ks, count)
 
 
 # ---- the activity front: beads at rest are not stepped --------------------------------------
@@ -1711,7 +1861,7 @@ def advance_front(flags, params, start, new, ks, windows):
 
 
 @njit(inline="always")
-def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
+def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments, run_lanes):
     """Up to nsteps steps of dt from buffers[counters.current]: a pass over the chain, then
     the windows of the events located inside the step stepped alone (:func:`local_events`).
     Stops early on an error or when the event log is half full (counters.status).
@@ -1738,7 +1888,7 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
         viscous, power, work, windows = 0.0, 0.0, 0.0, 0
         if flags[LOCATE] and counters.flagged > 0:
             viscous, power, work, windows = local_events(at_run_time(flags), params, old, new,
-                                                         t0, dt, ks)
+                                                         t0, dt, ks, run_lanes)
             if counters.status != OK:
                 return
         advance_front(at_run_time(flags), params, start, new, ks, windows)
@@ -1755,7 +1905,7 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments):
 
 @njit(inline="always")
 def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
-                   run_segments):
+                   run_segments, run_lanes):
     """Frames ``first .. first + nframes - 1`` (frame ``i`` ends at step ``i * spf``), each
     state at a frame's end copied into ``block`` row ``i - first`` (the beads of the activity
     front only, once it is known: ``block`` holds the beads at rest already, :func:`new_block`;
@@ -1770,7 +1920,7 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
         todo = end - counters.step
         if counters.budget > 0:
             todo = min(todo, counters.budget - (counters.step - step0))
-        advance_steps(flags, params, buffers, ks, todo, dt, run_segments)
+        advance_steps(flags, params, buffers, ks, todo, dt, run_segments, run_lanes)
         if counters.status != OK:
             return k
         if counters.step < end:  # the budget ran out inside the frame
@@ -1823,8 +1973,9 @@ def named_params(p):
 @njit(inline="always")
 def named_state(k):
     """:class:`KernelState` from ``plain(ks)``."""
-    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], k[4], Segments(*k[5]), Beads(*k[6]),
-                       k[7], k[8], k[9])
+    lanes = k[8]
+    return KernelState(k[0], k[1], EventLog(*k[2]), k[3], Segments(*k[4]), Beads(*k[5]), k[6],
+                       k[7], Lanes(lanes[0], EventLog(*lanes[1]), lanes[2], lanes[3]))
 
 
 _KERNELS: dict = {}
@@ -1943,12 +2094,51 @@ def _make_advance(flags, nrt: bool):
                          branch, jlo, jhi), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
+    @variant_jit(tag, cache=True, parallel=flags.threaded)
+    def run_lanes(params, old, new, t0, dt, ks, count):
+        """The lanes' windows still to be stepped (:func:`step_lane`), on the threads numba
+        has in a threaded variant when there are at least :data:`PARALLEL_WINDOWS`, in order
+        otherwise (the same results).  As in ``run_segments``, the records are taken apart
+        before the parallel loop and put together again in it."""
+        rt = at_run_time(literal)
+        shared = (ks.closed, ks.counters, ks.chatter, ks.seg.branch, ks.local.x, ks.local.v,
+                  ks.local.a, ks.windows, ks.window_sums)
+        lanes = ks.lanes
+        log = lanes.log
+        lane_arrays = (lanes.counters, log.time, log.contact, log.kind, log.loss,
+                       lanes.switching, lanes.chatter)
+        if not literal[THREADED] or count < PARALLEL_WINDOWS:
+            for g in range(LANES):
+                step_lane(rt, params, old, (new.x, new.v, new.a), shared, lane_arrays, g,
+                          count, t0, dt)
+            return
+        gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s, drive = params
+        l0, l1, l2, l3, l4 = law
+        t_coef, t_base, t_scale, t_last, t_step = table
+        m0, m1, m2, m3, m4, m5, m6 = mix
+        d0, d1, d2, d3, d4, d5 = drive
+        xo, vo, ao = old
+        xn, vn, an = new
+        closed, counters, chatter, memo, lx, lv, la, windows, sums = shared
+        lc, time, contact, kind, loss, switching, lchat = lane_arrays
+        for g in prange(LANES):
+            p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
+                       SchwarzConstants(l0, l1, l2, l3, l4),
+                       ForceTable(t_coef, t_base, t_scale, t_last, t_step),
+                       Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
+                       Drive(d0, d1, d2, d3, d4, d5))
+            step_lane(Flags(*literal), p, Beads(xo, vo, ao), (xn, vn, an),
+                      (closed, counters, chatter, memo, lx, lv, la, windows, sums),
+                      (lc, time, contact, kind, loss, switching, lchat), g, count, t0, dt)
+
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
         return advance_frames(literal, named_params(params), Beads(*buffers), named_state(ks),
-                              FrameBlock(*block), first, nframes, spf, dt, run_segments)
+                              FrameBlock(*block), first, nframes, spf, dt, run_segments,
+                              run_lanes)
 
     variant_cache(run_segments, flags)
+    variant_cache(run_lanes, flags)
     variant_cache(advance, (*flags, nrt))
     return advance
 
