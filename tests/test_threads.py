@@ -5,7 +5,8 @@ may run on any thread, and their results are joined in segment order.  What must
 
 * the thread count changes nothing: 1 and 2 threads give bitwise the same file contents
   (positions, velocities, contact states, events, every ledger term), located and
-  step-quantized events alike, with events in several segments;
+  step-quantized events alike, with events in several segments and many event windows a
+  step (stepped in lanes on the threads);
 * the segment size changes nothing but the order in which the damping power is summed:
   positions, velocities, states and events are bitwise those of the one-segment (serial)
   pass, and ``D_viscous`` agrees to round-off.
@@ -85,6 +86,23 @@ def test_long_chain_with_events_in_many_segments(n, segment, locate, monkeypatch
     assert_bitwise(one, two)
     segments = np.unique((one.trajectory.ev_contact - 1) // segment)
     assert len(segments) >= 40, segments
+
+
+def test_many_event_windows_a_step_stepped_on_the_threads(monkeypatch):
+    """A thermal chain of 3 10^4 beads at T = 2, where contacts snap shut and apart all along
+    it: more than fast_kernel.PARALLEL_WINDOWS event windows a step, so that two threads
+    step them in lanes at once, some widened and stepped again.  2 threads give the
+    1-thread result bitwise."""
+    scene = load_scene("micro-star", [("chain.n", 30_000), ("thermal.temperature", 2.0),
+                                      ("thermal.seed", 1), ("run.duration", 0.5),
+                                      ("run.output_interval", 0.25)])
+    one = fast_run(scene, fk.SEGMENT, 1, monkeypatch)
+    two = fast_run(scene, fk.SEGMENT, 2, monkeypatch)
+    assert two.stats["threads"] == 2
+    assert_bitwise(one, two)
+    steps = 0.5 / scene.run.dt
+    assert one.stats["event_windows"] / steps > 2 * fk.PARALLEL_WINDOWS
+    assert one.stats["event_windows_widened"] > 0
 
 
 @settings(max_examples=25, deadline=None)

@@ -42,10 +42,10 @@ passes over a few beads per event, whatever the chain's length.  A window's resu
 on its beads and contacts alone (it starts from the step's counters and chatter guard, and
 keeps its events apart), so the windows are stepped in :data:`LANES` lanes, on the threads
 in a threaded variant, and merged in order along the chain (events, hysteresis losses,
-chatter guard): the result does not depend on the thread count.  A contact that sits on its switching point after a switch (DMT, Hertz:
-``delta_off = 0``) is switched back at once if it moves outward (the reference's settle
-rule); more than ``MAX_SWITCHES`` switches of one contact at one instant stop the run
-(chatter).
+chatter guard): the result does not depend on the thread count.  A contact that sits on
+its switching point after a switch (DMT, Hertz: ``delta_off = 0``) is switched back at once
+if it moves outward (the reference's settle rule); more than ``MAX_SWITCHES`` switches of
+one contact at one instant stop the run (chatter).
 
 ``locate = False``: plain step-quantized Verlet, as a fixed-step MD code: after each step a
 closed contact with ``delta <= delta_off`` opens and an open one with ``delta >= 0`` closes
@@ -890,16 +890,16 @@ def quantized_due(closed, d, delta_off):
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
     an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv,
-    branch, jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the pass's activity
-    front being at rest, :func:`step_range`): returns
-    its row of ``Segments.real`` (damping power from the v_est rates, and the forces of its
-    first and last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized
-    switches, status, its contact); the first flagged contacts go into row ``s`` of ``flag``,
-    the switches into ``ev_*``.  The bead left of its first contact is left to
+    branch, jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the
+    pass's activity front being at rest, :func:`step_range`): returns its row of
+    ``Segments.real`` (damping power from the v_est rates, and the forces of its first and
+    last contacts) and of ``Segments.ints`` (flagged contacts, step-quantized switches,
+    status, its contact); the first flagged contacts go into row ``s`` of ``flag``, the
+    switches into ``ev_*``.  The bead left of its first contact is left to
     :func:`merge_segments` (both its contact forces are needed), or at rest if the pass
-    starts inside the segment.  The arrays it writes are
-    arguments, not fields of a record: numba's parallel loop drops writes made through a
-    record built inside it (:func:`run_segments`).
+    starts inside the segment.  The arrays it writes are arguments, not fields of a record:
+    numba's parallel loop drops writes made through a record built inside it
+    (:func:`run_segments`).
 
     One pass over the contacts from left to right: predict the right bead of the contact,
     compute the contact force, finish the left bead (its acceleration and end velocity).
