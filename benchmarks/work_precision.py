@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from mdgran.compare import PREDICTABLE
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import BackendUnavailable, run
 
 RESULTS = Path(__file__).parent / "results"

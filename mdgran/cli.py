@@ -55,7 +55,7 @@ def _finite_or_none(obj):
 
 
 def _load(args):
-    from .scene import load_scene, parse_override
+    from .model.scene import load_scene, parse_override
 
     overrides = [parse_override(s) for s in (args.set or [])]
     return load_scene(args.scene, overrides)
@@ -63,7 +63,7 @@ def _load(args):
 
 # ---- subcommands -----------------------------------------------------------------------
 def cmd_scenes(args) -> int:
-    from .scene import builtin_scenes, describe
+    from .model.scene import builtin_scenes, describe
 
     names = builtin_scenes()
     width = max(len(n) for n in names)
@@ -74,7 +74,7 @@ def cmd_scenes(args) -> int:
 
 def scene_info(scene) -> dict:
     """The derived values that ``mdgran info`` prints (nondimensional, plus SI scales)."""
-    from .contact import lambda_from_fc, table_error
+    from .model.contact import lambda_from_fc, table_error
 
     law = scene.law
     info = {"scene": scene.name, **law.describe()}
@@ -93,7 +93,7 @@ def scene_info(scene) -> dict:
         info["mixture"] = scene.mixture.describe()
     sc = scene.scales
     if sc is not None:
-        from .units import wire_tension
+        from .model.units import wire_tension
 
         info.update(sc.as_dict())
         info["k1_N_per_m"] = scene.substrate.k1 * sc.stiffness
@@ -225,7 +225,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from .scene import parse_override
+    from .model.scene import parse_override
     from .sweep import run_sweep, sweep_summary
 
     if args.workers < 1:
@@ -383,7 +383,7 @@ def flag_message(exc) -> str:
 
 def main(argv=None) -> int:
     from .backends.base import IntegrationError
-    from .scene import SceneError
+    from .model.scene import SceneError
     from .simulation import BackendUnavailable
 
     from .signals import terminate_as_interrupt

@@ -341,7 +341,7 @@ def grazing_test(scene, ref: "BackendRuns", other: "BackendRuns"):
     backend without the event (``side`` names the one with it) has that contact within ``SAFETY``
     times the summed error estimates of its switching point (``delta = 0`` for a close,
     ``delta_off`` for an open) in some frame within ``slack`` plus one frame of ``t``."""
-    from .chain import model_from_scene
+    from .model.chain import model_from_scene
 
     model = model_from_scene(scene)
     column = {int(c): k for k, c in enumerate(model.contact_numbers)}

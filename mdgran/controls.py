@@ -38,7 +38,7 @@ def si_matched_velocity(micro_scene, macro_scene) -> float:
 
 def control_scenes(duration: float | None = None) -> dict:
     """The four scenes of the controls (``duration`` shortens every run: tests)."""
-    from .scene import load_scene
+    from .model.scene import load_scene
 
     extra = [("run.duration", float(duration))] if duration is not None else []
     micro = load_scene("micro-star", extra)

@@ -186,7 +186,7 @@ def create_series(f, scene, model, terms, bead_ids, stride, positions, detail,
     """Create every time series of a new file: the stored beads' displacement and velocity
     (and positions in nm, linked as ``/particles/beads``), the ledger ``terms`` and the
     stored contacts' series (:func:`contact_names`, numbered by ``model``, the chain's
-    :class:`~mdgran.chain.ChainModel`); returns ``{name: {"step", "time", "value"}}``.  Every
+    :class:`~mdgran.model.chain.ChainModel`); returns ``{name: {"step", "time", "value"}}``.  Every
     series but the positions shares the first series' step and time."""
     series, shared = {}, {}
 

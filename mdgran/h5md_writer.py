@@ -14,7 +14,7 @@ import numpy as np
 from . import checkpoint
 from . import h5md_layout as layout
 from .h5md_append import append_events, append_rows
-from .chain import touching_contacts
+from .model.chain import touching_contacts
 from .h5md_layout import CONTACT_SERIES, COMPRESSION, H5_LIBVER
 from .rest_blocks import gather_rows
 from .run_environment import mpi_ranks_of, mpi_world_size
@@ -42,7 +42,7 @@ class H5MDWriter:
     (:data:`~mdgran.h5md_layout.CONTACT_SERIES`), as each block holds them (the driver
     computes them once per block: :meth:`~mdgran.backends.base.Frames.contact_series`).  The
     writer computes nothing: the chain's numbering comes from ``model`` (the backend's
-    :class:`~mdgran.chain.ChainModel`), the checkpoints from the driver (:meth:`checkpoint`).
+    :class:`~mdgran.model.chain.ChainModel`), the checkpoints from the driver (:meth:`checkpoint`).
     ``/parameters`` attribute ``mpi_ranks`` records the number of MPI ranks the run was
     split over (:func:`~mdgran.run_environment.mpi_ranks_of` of ``backend``)."""
 

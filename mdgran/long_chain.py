@@ -121,7 +121,7 @@ def run_pulse(n: int, v0: float = 12.0, lam: float | None = None, duration: floa
     backend is ``fast`` with a contact table to compressions of ``max(100, v0)`` (the first
     contacts of a hard impulse go beyond the default 100).  A run that fails keeps its frames
     so far and says so in its result's status."""
-    from .scene import load_scene
+    from .model.scene import load_scene
     from .simulation import run
 
     keys = [("chain.n", int(n)), ("impulse.velocity", float(v0)),
@@ -133,7 +133,7 @@ def run_pulse(n: int, v0: float = 12.0, lam: float | None = None, duration: floa
     if backend is None:
         backend = f"fast:delta_max={max(100.0, abs(float(v0))):g}"
     res = run(scene, backend, keep=False, reporters=[tracker], raise_errors=False)
-    from .chain import model_from_scene
+    from .model.chain import model_from_scene
 
     profile = pulse_profile(tracker, model_from_scene(scene), v0)
     profile["lambda"] = scene.contact.lambda_

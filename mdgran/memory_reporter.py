@@ -27,7 +27,7 @@ class MemoryReporter:
 
     def record(self, scene=None, backend="") -> Run:
         """The frames so far as a :class:`~mdgran.run_record.Run` of ``scene`` (a
-        :class:`~mdgran.scene.Scene`) on ``backend``."""
+        :class:`~mdgran.model.scene.Scene`) on ``backend``."""
         blocks = self.blocks
 
         def joined(name, dtype=float):

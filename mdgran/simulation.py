@@ -2,7 +2,7 @@
 
 Example::
 
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
     result = run(load_scene("micro-star", [("run.duration", 50.0)]), "reference")
     traj = result.trajectory          # arrays in memory
@@ -41,7 +41,7 @@ from .h5md_writer import H5MDWriter
 from .memory_reporter import MemoryReporter
 from .progress import CompileNotice, ProgressReporter
 from .run_record import ledger_scale, relative_ledger_error
-from .scene import SceneError
+from .model.scene import SceneError
 from .signals import FrameSections
 from .storage import OutputLocked
 
@@ -232,7 +232,7 @@ def worst(so_far: float, errors: np.ndarray) -> float:
 def report(reporter, block) -> None:
     """Hand the frames of ``block`` (:class:`~mdgran.backends.base.Frames`) to ``reporter``:
     whole if it has ``report_block(block)``, else frame by frame, ``report(frame, ledger)``
-    (each frame's ledger a dict, as :meth:`~mdgran.chain.ChainModel.ledger` gives it)."""
+    (each frame's ledger a dict, as :meth:`~mdgran.model.chain.ChainModel.ledger` gives it)."""
     whole = getattr(reporter, "report_block", None)
     if whole is not None:
         whole(block)
@@ -271,7 +271,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
     in-memory trajectory then holds only the resumed frames; the file holds all).  A run whose
     frames cannot fit in memory or on disk is refused first (:func:`check_resources`).  The run
-    works on its own copy of ``scene``, checked again (:meth:`~mdgran.scene.Scene.own_copy`).
+    works on its own copy of ``scene``, checked again (:meth:`~mdgran.model.scene.Scene.own_copy`).
 
     ``collective`` (default True): under ``mpiexec`` every rank runs this same call (LAMMPS
     splits the chain over them), so rank 0 alone writes ``out`` and shows progress.  False: this

@@ -34,7 +34,7 @@ import numpy as np
 from . import analysis as an
 from . import paper_figures as pf
 from . import controls
-from .scene import load_scene
+from .model.scene import load_scene
 from .storage import write_atomic
 from .run_record import read_h5
 
@@ -85,14 +85,14 @@ def _listed(indices: list) -> str:
 
 
 def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
-    """Refuse (:class:`~mdgran.scene.SceneError`, one line, exit status 2) a sweep folder that
+    """Refuse (:class:`~mdgran.model.scene.SceneError`, one line, exit status 2) a sweep folder that
     is unfinished (a case without its JSON) or whose finished cases lack their ``.h5`` (an
     older mdgran's MPI sweep wrote only the JSON on its worker ranks): their figures and tests
     would silently leave those cases out, or whose ``.h5`` cannot be read (cut short,
     overwritten: the report ran a minute, then a traceback).  Returns the cases that failed
     without writing an
     ``.h5`` (an exception, a worker that died), which the report names in its run status."""
-    from .scene import SceneError
+    from .model.scene import SceneError
 
     from .run_record import unreadable
 
@@ -739,8 +739,8 @@ def paper_details() -> dict:
     """Two details of the paper the report states: (1) Table II's stress column is T_s over a
     circle of the wire's *length* as diameter, T_s / (pi L_s^2 / 4), not T_s / A_s with
     A_s = pi d_s^2 / 4; (2) the COS relation the paper uses for fc against the exact
-    Maugis-Dugdale pull-off (:func:`mdgran.contact.maugis_dugdale_pulloff`)."""
-    from .contact import fc_from_lambda, maugis_dugdale_pulloff
+    Maugis-Dugdale pull-off (:func:`mdgran.model.contact.maugis_dugdale_pulloff`)."""
+    from .model.contact import fc_from_lambda, maugis_dugdale_pulloff
 
     wires = [{"d": r["d"], "printed_MPa": r["sigma_y"] / 1e6,
               "T_s_over_pi_L_s2_4_MPa": r["T_s"] / (math.pi * r["L_s"] ** 2 / 4) / 1e6,

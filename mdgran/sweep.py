@@ -96,7 +96,7 @@ import sys
 import time as _time
 from pathlib import Path
 
-from .scene import SceneError, builtin_scenes, load_scene, read_toml
+from .model.scene import SceneError, builtin_scenes, load_scene, read_toml
 from .run_record import unreadable
 from .storage import OutputLock, OutputLocked, write_atomic
 from .signals import interrupting

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import Phase, settings
 
-from mdgran.scene import Scene, resolve
+from mdgran.model.scene import Scene, resolve
 
 # Hypothesis draws the same cases on every run ("ci", the default: the test command is
 # reproducible, a red CI is a real failure and comes back on the next run); MDGRAN_HYPOTHESIS=

@@ -6,7 +6,7 @@ import pytest
 
 from mdgran.backends import BACKENDS
 from mdgran.compare import compare
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 
 TEST_BACKENDS = {
     "tight-reference": "backends_for_tests:TightReference",

@@ -12,9 +12,9 @@ import pytest
 
 from conftest import InterruptAt
 
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 from mdgran.reporters import H5MDWriter
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 from mdgran.run_record import dataset_paths, read_h5
 
@@ -131,7 +131,7 @@ def test_resume_with_contacts_is_bitwise(runs):
 
 def test_a_damaged_contact_series_is_refused(runs, tmp_path):
     """The checksums cover the new series: one changed state makes the resume refuse."""
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     p = tmp_path / "r.h5.partial"
     shutil.copy(runs["dir"] / "cli" / "r.h5.partial", p)

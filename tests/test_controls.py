@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mdgran import controls
-from mdgran.units import scales_from_material
+from mdgran.model.units import scales_from_material
 
 
 def test_control_scenes_match_as_documented():

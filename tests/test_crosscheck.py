@@ -3,7 +3,7 @@ reference against LAMMPS, must pass every criterion of the harness."""
 import pytest
 
 from mdgran.compare import compare
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 
 
 @pytest.mark.lammps

@@ -1,4 +1,4 @@
-"""Imposed excitations (mdgran.drive): a half-sine force pulse and a base motion
+"""Imposed excitations (mdgran.model.drive): a half-sine force pulse and a base motion
 under the substrate, on the reference, fast and LAMMPS backends (the Python hook and the native
 contact), against analytic motions, the momentum a pulse gives, and the energy ledger with the
 excitations' work.
@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mdgran import run
-from mdgran.drive import base_from_acceleration, base_from_displacement
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.drive import base_from_acceleration, base_from_displacement
+from mdgran.model.scene import SceneError, load_scene
 
 from conftest import h5_datasets, make_scene
 

@@ -245,7 +245,7 @@ def test_a_killed_holders_forked_children_do_not_keep_its_lock(tmp_path):
 def partial(tmp_path_factory, request):
     """A reference run of micro-star to t = 20, interrupted at t = 12 with a checkpoint, and
     the uninterrupted run's file."""
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     d = tmp_path_factory.mktemp("cp")
@@ -292,7 +292,7 @@ def test_damaged_checkpoint_is_refused_and_kept(tmp_path, partial, damage):
     gave thousands of zero frames."""
     import json
 
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     sc, src, _ = partial
     p = tmp_path / "r.h5.partial"
@@ -325,7 +325,7 @@ def test_a_flipped_byte_is_refused_or_harmless(tmp_path_factory, partial, where,
     """Any one byte changed anywhere in a checkpoint file: the resume is refused with one
     line, or (the byte was in space the file does not use) it gives the uninterrupted run's
     frames bitwise.  Never a resumed run with other numbers."""
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     sc, src, whole = partial
     d = tmp_path_factory.mktemp("flip")

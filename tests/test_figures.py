@@ -78,7 +78,7 @@ def test_smoothed_rate_where_the_cubic_spline_undershot():
 # ---- short runs shared by the figure tests -------------------------------------------------------
 @pytest.fixture(scope="module")
 def micro():
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     sc = load_scene("micro-star", [("run.duration", 40.0), ("run.tolerance", 1e-6)])
@@ -87,7 +87,7 @@ def micro():
 
 @pytest.fixture(scope="module")
 def hertz():
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     sc = load_scene("macro-hertz", [("run.duration", 20.0), ("run.tolerance", 1e-6)])

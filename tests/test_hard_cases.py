@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 FULL = os.environ.get("MDGRAN_FULL") == "1"

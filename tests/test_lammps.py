@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 

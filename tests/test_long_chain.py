@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 
 from conftest import make_scene
 
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 from mdgran.long_chain import PulseTracker, bead_energies, pulse_profile, run_pulse
 from mdgran.simulation import run
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import pytest
 
 from mdgran.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from mdgran.scene import SceneError
+from mdgran.model.scene import SceneError
 from mdgran.study import (interval_over_realizations, realization_groups,
                           realization_statistics, realizations_markdown, sweep_cases)
 from mdgran.sweep import load_sweep, run_sweep
@@ -30,7 +30,7 @@ def spec(tmp_path, head="", body=GRID, name="sw.toml"):
 
 
 def velocity(case):
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
 
     return load_scene("micro-star", case["overrides"]).data["impulse"]["velocity"]
 

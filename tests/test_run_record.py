@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mdgran import analysis as an
-from mdgran.chain import contact_numbers, replay_states
+from mdgran.model.chain import contact_numbers, replay_states
 from mdgran.run_record import Run, ledger_scale, read_h5
-from mdgran.scene import builtin_scenes, load_scene
+from mdgran.model.scene import builtin_scenes, load_scene
 from mdgran.simulation import run
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from mdgran.backends import BACKENDS
 from mdgran.cli import main
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import LEDGER_EXCEEDED, run
 
 DEFECT = "ledger-defect"

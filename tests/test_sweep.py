@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from mdgran.scene import SceneError
+from mdgran.model.scene import SceneError
 from mdgran.sweep import load_sweep, run_sweep
 
 

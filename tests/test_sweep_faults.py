@@ -27,7 +27,7 @@ import time
 _spec = os.environ.get("MDGRAN_TEST_FAULTS")
 if _spec:
     import mdgran.sweep as _sw
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     _real = _sw.run_case
 

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mdgran
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 from mdgran.long_chain import PulseTracker, pulse_profile
 
 n, v0 = 100_000, 12.0

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chain import contact_numbers, initial_states, replay_states  # noqa: F401 - re-exported
+from ..model.chain import contact_numbers, initial_states, replay_states  # noqa: F401 - re-exported
 from .effective_damping import SMOOTHING_TIME
 
 #: Events closer than this (time units 1/q) form one re-clustering event.  About half the fast
@@ -66,7 +66,7 @@ def contact_states(times, ev_time, ev_contact, ev_kind, n: int, walls: bool = Tr
     """Contact states at each of ``times``: bool ``[F, n_contacts]`` (True = closed).
 
     A frame at time ``t`` shows every event with ``ev_time <= t`` applied
-    (:func:`~mdgran.chain.replay_states`).
+    (:func:`~mdgran.model.chain.replay_states`).
     """
     init = initial_states(n, walls) if initial is None else np.asarray(initial, bool)
     return replay_states(init, ev_time, ev_contact, ev_kind, times, walls)
