@@ -49,7 +49,7 @@ ONE_RUN = r"""
 import json, sys, time
 from mdgran.model.scene import load_scene
 from mdgran.simulation import run
-from mdgran.reporters import H5MDWriter
+from mdgran.output.reporters import H5MDWriter
 keys, out = json.loads(sys.argv[1]), sys.argv[2] or None
 spent = [0.0]
 def timed(method):

@@ -41,7 +41,7 @@ OUT = HERE / "results" / "sweep_case_profile.json"
 
 CHILD = r'''
 import collections, functools, json, os, shutil, sys, tempfile, time, types
-import mdgran.sweep as S, mdgran.simulation as sim, mdgran.reporters as R
+import mdgran.sweep as S, mdgran.simulation as sim, mdgran.output.reporters as R
 import mdgran.backends.fast as F
 F._time = types.SimpleNamespace(perf_counter=time.process_time)  # kernel_s as CPU time
 acc = collections.Counter()

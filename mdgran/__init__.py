@@ -35,8 +35,8 @@ _LAZY = {
     "RunResult": ("simulation", "RunResult"),
     "BackendUnavailable": ("simulation", "BackendUnavailable"),
     "IntegrationError": ("backends.base", "IntegrationError"),
-    "Run": ("run_record", "Run"),
-    "Trajectory": ("run_record", "Run"),  # its former name (mdgran 0.1), kept for old code
+    "Run": ("output.run_record", "Run"),
+    "Trajectory": ("output.run_record", "Run"),  # its former name (mdgran 0.1), kept for old code
 }
 
 __all__ = ["__version__", *_LAZY]

@@ -24,6 +24,19 @@ MOVED = {
     "mdgran.scene_records": "mdgran.model.scene_records",
     "mdgran.scene": "mdgran.model.scene",
     "mdgran.chain": "mdgran.model.chain",
+    # the output
+    "mdgran.storage": "mdgran.output.storage",
+    "mdgran.checkpoint": "mdgran.output.checkpoint",
+    "mdgran.measures": "mdgran.output.measures",
+    "mdgran.run_record": "mdgran.output.run_record",
+    "mdgran.trajectory": "mdgran.output.trajectory",
+    "mdgran.progress": "mdgran.output.progress",
+    "mdgran.run_environment": "mdgran.output.run_environment",
+    "mdgran.h5md_layout": "mdgran.output.h5md_layout",
+    "mdgran.h5md_append": "mdgran.output.h5md_append",
+    "mdgran.h5md_writer": "mdgran.output.h5md_writer",
+    "mdgran.memory_reporter": "mdgran.output.memory_reporter",
+    "mdgran.reporters": "mdgran.output.reporters",
 }
 
 #: files whose frames stand between an ``import`` statement and :class:`MovedFinder`

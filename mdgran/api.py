@@ -32,10 +32,10 @@ def scenes() -> list:
 
 
 def read(path):
-    """The :class:`~mdgran.run_record.Run` stored in an mdgran H5MD file ``path`` (written by
+    """The :class:`~mdgran.output.run_record.Run` stored in an mdgran H5MD file ``path`` (written by
     ``mdgran.run(..., out=path)`` or ``mdgran run --out path``): frames, contact states,
     ledger, events, the stored scene and status."""
-    from .run_record import read_h5
+    from .output.run_record import read_h5
 
     return read_h5(os.fspath(path))
 
@@ -88,10 +88,10 @@ def as_scene(scene, overrides=()):
 
 
 def _check_out(out, scene) -> str:
-    """``out`` as a path, refused up front (:func:`~mdgran.storage.check_out_file`) where the
+    """``out`` as a path, refused up front (:func:`~mdgran.output.storage.check_out_file`) where the
     run could not write it at its end."""
     from .model.scene import SceneError
-    from .storage import check_out_file
+    from .output.storage import check_out_file
 
     if not isinstance(out, (str, os.PathLike)):
         raise SceneError("out", f"must be a path to an .h5 file or None, not "
@@ -118,7 +118,7 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
       (what ``--set`` does on the command line); also nested or as (key, value) pairs.
     * ``progress``: a progress bar on stderr for runs longer than 2 s.
     * ``keep`` (default True): keep the run in memory as ``result.trajectory`` (a
-      :class:`~mdgran.run_record.Run`).
+      :class:`~mdgran.output.run_record.Run`).
     * ``raise_errors`` (default True): a run that fails (blow-up, stalled step) raises
       :class:`~mdgran.backends.base.IntegrationError` after writing its frames; False returns
       the result with ``status = "failed: ..."``.

@@ -32,7 +32,7 @@ def paper_wire_k3(scene) -> float | None:
 
 
 def term_budget(run) -> dict:
-    """The budget of :class:`~mdgran.run_record.Run` ``run`` (module docstring), from its
+    """The budget of :class:`~mdgran.output.run_record.Run` ``run`` (module docstring), from its
     stored frames and contact states."""
     scene = run.scene
     m = model_from_scene(scene)

@@ -7,8 +7,8 @@ whose energy-ledger error exceeds its backend's declared bound (status ``ledger-
 one line on stderr; every frame is in the file) and a sweep with any case not complete.
 Heavy imports are done inside the subcommands so that ``mdgran scenes`` starts fast.
 
-``--out`` is checked before anything runs (:func:`~mdgran.storage.check_out_file`,
-:func:`~mdgran.storage.check_out_dir`): a
+``--out`` is checked before anything runs (:func:`~mdgran.output.storage.check_out_file`,
+:func:`~mdgran.output.storage.check_out_dir`): a
 file name for ``run`` (not empty, not a folder, not ending in ``/``: a trailing slash is refused,
 not taken as a folder to put a file in; not the scene file itself; in a folder that exists or
 can be created and is writable; short enough for the temporary ``NAME.tmp-PID`` and
@@ -24,7 +24,7 @@ import math
 import os
 import sys
 
-from .storage import check_out_dir, check_out_file
+from .output.storage import check_out_dir, check_out_file
 
 
 class UsageError(Exception):
@@ -127,7 +127,7 @@ def exit_status(exc: KeyboardInterrupt) -> int:
 
 def interrupted_line(exc: KeyboardInterrupt, out: str) -> str:
     """What an interrupted ``run`` kept, and how to go on."""
-    from .checkpoint import has_checkpoint
+    from .output.checkpoint import has_checkpoint
     from .simulation import partial_path
 
     name = getattr(exc, "signum", None)
@@ -155,7 +155,7 @@ def _events_in(path, default):
 def cmd_run(args) -> int:
     from .backends.base import IntegrationError
     from .simulation import LEDGER_EXCEEDED, run
-    from .storage import StorageError
+    from .output.storage import StorageError
 
     check_out_file(args.out, args.scene)
     if not math.isfinite(args.checkpoint) or args.checkpoint < 0:

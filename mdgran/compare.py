@@ -87,7 +87,7 @@ class Criterion:
 @dataclass
 class BackendRuns:
     name: str
-    nominal: object  # Run (mdgran.run_record)
+    nominal: object  # Run (mdgran.output.run_record)
     refined: object
     error: np.ndarray  # [F] own error estimate, max over beads
     factor: float
@@ -121,7 +121,7 @@ def refinement_text(scene, overrides) -> str:
 
 def run_plan(scene, backends, ensemble: int, refinements: dict) -> dict:
     """The runs of a comparison, in order: ``{key: (backend, kind, role, duration)}`` (see
-    :class:`mdgran.progress.RunSeries`); ``refinements``: backend -> its refinement's
+    :class:`mdgran.output.progress.RunSeries`); ``refinements``: backend -> its refinement's
     overrides."""
     dur = float(scene.run.duration)
     plan = {}
@@ -162,7 +162,7 @@ def _run(series, key, scene, name, **kw):
 def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEMBLE,
                 series=None, refinement=None) -> BackendRuns:
     """``name``'s nominal, refined and ensemble runs.  ``series`` (a
-    :class:`~mdgran.progress.RunSeries` holding :func:`run_plan`'s keys) draws their labelled
+    :class:`~mdgran.output.progress.RunSeries` holding :func:`run_plan`'s keys) draws their labelled
     progress; without it, ``progress`` gives each run :func:`~mdgran.simulation.run`'s own
     bar.  ``refinement``: ``(overrides, factor)``, if already known."""
     from .simulation import make_backend
@@ -432,7 +432,7 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     ``report.json``, ``report.md`` and figures into ``out_dir`` when given.
 
     ``progress``: a line per run on ``stream`` (standard error) with its role, ``run k of N``
-    and the time left for all runs (:class:`mdgran.progress.RunSeries`); on a terminal it is
+    and the time left for all runs (:class:`mdgran.output.progress.RunSeries`); on a terminal it is
     redrawn in place, elsewhere a line when each run starts and ends and one every
     ``progress_interval`` seconds (default 15) in between."""
     from .simulation import make_backend
@@ -450,7 +450,7 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     ref = runs[0]
     pred = predictability(scene, ref, series)
     if series is not None:
-        from .progress import fmt_seconds
+        from .output.progress import fmt_seconds
 
         series.say(f"compare {scene.name}: {len(series.keys)} runs done in "
                    f"{fmt_seconds(series.elapsed())}; judging"
@@ -468,7 +468,7 @@ def _run_series(scene, backends: tuple, ensemble: int, refinements: dict, stream
                 progress_interval):
     """The progress of every run :func:`compare` makes (:func:`run_plan`), started with a
     line saying what they are."""
-    from .progress import RunSeries
+    from .output.progress import RunSeries
 
     plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
     series = RunSeries(plan, stream=stream, interval=progress_interval)

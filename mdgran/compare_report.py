@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .storage import write_atomic
+from .output.storage import write_atomic
 
 
 def _adhesive(scene) -> bool:

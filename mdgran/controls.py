@@ -100,7 +100,7 @@ def compare_decay(micro, macro, step: float = 0.05) -> dict:
 
 
 def cluster_activity(run) -> dict:
-    """How much a chain (a :class:`~mdgran.run_record.Run`) clusters: new clusters formed, and
+    """How much a chain (a :class:`~mdgran.output.run_record.Run`) clusters: new clusters formed, and
     the time of the last re-clustering event, in units of its own ``T_c``."""
     from .analysis import reclustering_events
 
@@ -135,7 +135,7 @@ def run_controls(runs_dir, backend: str = "reference", duration: float | None = 
     from pathlib import Path
 
     from .simulation import BackendUnavailable, run
-    from .run_record import read_h5
+    from .output.run_record import read_h5
 
     runs_dir = Path(runs_dir)
     scenes = control_scenes(duration)

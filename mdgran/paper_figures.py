@@ -1,6 +1,6 @@
 """The paper's figures, drawn from runs and sweep results through :mod:`mdgran.analysis`.
 
-One function per figure; each takes runs (:class:`~mdgran.run_record.Run`, whose cached
+One function per figure; each takes runs (:class:`~mdgran.output.run_record.Run`, whose cached
 ``measures`` it reads) or sweep case tables, draws onto a new matplotlib figure, saves it as PNG
 and returns the numbers it shows (for the report).  Time is
 shown in characteristic periods ``T_c`` (the primary pulse's double crossing time, see

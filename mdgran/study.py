@@ -35,8 +35,8 @@ from . import analysis as an
 from . import paper_figures as pf
 from . import controls
 from .model.scene import load_scene
-from .storage import write_atomic
-from .run_record import read_h5
+from .output.storage import write_atomic
+from .output.run_record import read_h5
 
 FLAGSHIP = ("micro-star", "macro-hertz")
 #: beyond the paper: sweep name -> (axis shown as colour, its label, log colour scale)
@@ -52,7 +52,7 @@ BEYOND_STUDIES = ("long-chain",)
 def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None,
                label: str | None = None):
     """The run ``out/NAME.h5`` (made if missing), as read back from the file (a
-    :class:`~mdgran.run_record.Run`, its scene the stored one); ``label``: its progress line's
+    :class:`~mdgran.output.run_record.Run`, its scene the stored one); ``label``: its progress line's
     label (default the scene and backend)."""
     from .simulation import run
 
@@ -62,7 +62,7 @@ def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None
         out.mkdir(parents=True, exist_ok=True)
         reporters = []
         if progress:
-            from .progress import ProgressReporter
+            from .output.progress import ProgressReporter
 
             reporters.append(ProgressReporter(float(scene.run.duration),
                                               label=label or f"{name} [{backend}]"))
@@ -94,7 +94,7 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     ``.h5`` (an exception, a worker that died), which the report names in its run status."""
     from .model.scene import SceneError
 
-    from .run_record import unreadable
+    from .output.run_record import unreadable
 
     spec = json.loads((sweep_dir / "sweep.json").read_text())
     unrun, no_h5, failed, broken = [], [], [], []
@@ -133,8 +133,8 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
 
 def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     """Every finished case of a sweep folder: params, the scene stored in its run file, a lazy
-    loader of its :class:`~mdgran.run_record.Run` (``"run"``), and its measures
-    (:class:`~mdgran.measures.Measures`: the summary recomputed with the current analysis code,
+    loader of its :class:`~mdgran.output.run_record.Run` (``"run"``), and its measures
+    (:class:`~mdgran.output.measures.Measures`: the summary recomputed with the current analysis code,
     the C_eff and rate curves, the channels, segments and null-model case).  A folder with
     cases missing their files is refused (:func:`check_sweep_files`); a case that failed
     without an ``.h5`` is left out here (the report names it in its run status)."""

@@ -65,7 +65,7 @@ def h5_datasets(path) -> dict:
     """Dataset name -> array, and ``@parameters`` -> the /parameters attributes."""
     import h5py
 
-    from mdgran.run_record import dataset_paths
+    from mdgran.output.run_record import dataset_paths
 
     out = {}
     with h5py.File(path, "r") as f:
@@ -121,7 +121,7 @@ def markdown_without_timings(text: str) -> list:
 
 def states_replay(path) -> list:
     """Differences between the contact states stored in ``path`` and its events replayed."""
-    from mdgran.run_record import read_h5
+    from mdgran.output.run_record import read_h5
 
     run = read_h5(path)
     if run._closed is None:

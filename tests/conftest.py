@@ -26,7 +26,7 @@ def h5_datasets(path) -> dict:
     """Every dataset of an HDF5 file: path -> its values."""
     import h5py
 
-    from mdgran.run_record import dataset_paths
+    from mdgran.output.run_record import dataset_paths
 
     with h5py.File(path) as f:
         return {name: f[name][()] for name in dataset_paths(f)}

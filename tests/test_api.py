@@ -17,7 +17,7 @@ except ModuleNotFoundError:  # Python 3.10
 import mdgran
 from mdgran.model.scene import SCENE_DIR, SceneError
 from mdgran.simulation import RunResult
-from mdgran.run_record import LEDGER_NAMES, Run
+from mdgran.output.run_record import LEDGER_NAMES, Run
 
 SHORT = {"run.duration": 3.0}  # micro-star to t = 3: the primary pulse, ~0.5 s on reference
 

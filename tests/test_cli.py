@@ -8,7 +8,7 @@ import pytest
 from mdgran.cli import main
 from mdgran.model.scene import load_scene
 from mdgran.simulation import run
-from mdgran.run_record import read_h5
+from mdgran.output.run_record import read_h5
 
 BAD = [
     (["info", "no-such-scene"], "SCENE"),

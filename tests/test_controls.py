@@ -47,7 +47,7 @@ def test_ratio_windows_finds_the_interval_where_micro_is_below(lo, width, depth)
 
 
 def test_decay_time_of_an_exponential():
-    from mdgran.run_record import Run
+    from mdgran.output.run_record import Run
 
     t = np.linspace(0.0, 300.0, 3001)
     n = 8

@@ -148,7 +148,7 @@ def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
     subprocess.run([sys.executable, "-c", code, str(one)], check=True, timeout=300)
     subprocess.run([mpiexec, "-n", "2", sys.executable, "-c", code, str(two)], check=True,
                    timeout=300)
-    from mdgran.trajectory import read_h5
+    from mdgran.output.run_record import read_h5
 
     a, b = read_h5(one), read_h5(two)
     assert np.abs(a.x - b.x).max() < 1e-10

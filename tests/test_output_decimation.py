@@ -15,8 +15,8 @@ from conftest import InterruptAt
 
 from mdgran.model.chain import model_from_scene
 from mdgran.cli import main
-from mdgran.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
-from mdgran.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
+from mdgran.output.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
+from mdgran.output.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
 from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import run
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from mdgran.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
+from mdgran.output.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
 from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
@@ -169,7 +169,7 @@ def twice(x):
 NOTICE_CHILD = """
 import io, sys
 sys.path.insert(0, sys.argv[1])
-from mdgran.progress import CompileNotice
+from mdgran.output.progress import CompileNotice
 import cached_twice
 out = io.StringIO()
 with CompileNotice("scene [fast]", stream=out):

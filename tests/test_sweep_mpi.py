@@ -97,7 +97,7 @@ def test_lammps_sweep_on_mpi_ranks_does_not_deadlock(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     summ = json.loads((out / "summary.json").read_text())
     assert summ["cases"] == 4 and summ["complete"] == 4
-    from mdgran.trajectory import read_h5
+    from mdgran.output.run_record import read_h5
 
     for i in range(4):
         assert read_h5(out / "cases" / f"{i:04d}.h5").backend == "lammps"

@@ -149,7 +149,7 @@ def cluster_history(ev_time, ev_contact, ev_kind, n: int, walls: bool = True, in
 
 
 def trajectory_history(run, *, attach: bool = True, min_size: int = 1) -> ClusterHistory:
-    """:func:`cluster_history` of a run (a :class:`~mdgran.run_record.Run`)."""
+    """:func:`cluster_history` of a run (a :class:`~mdgran.output.run_record.Run`)."""
     return cluster_history(run.ev_time, run.ev_contact, run.ev_kind, run.n, run.walls,
                            run.initial_states(), attach, min_size)
 
@@ -293,7 +293,7 @@ def analyze_reclustering(run, c_eff, *, smoothing_time: float = SMOOTHING_TIME,
                          min_size: int = 1, history: ClusterHistory | None = None
                          ) -> ReclusteringAnalysis:
     """Clusters, segments, smoothed rate and segment measures of a run (a
-    :class:`~mdgran.run_record.Run`), given its ``c_eff`` [F] (normally
+    :class:`~mdgran.output.run_record.Run`), given its ``c_eff`` [F] (normally
     :func:`~.effective_damping.effective_damping`); ``history``: its
     :func:`trajectory_history` with the same ``attach`` and ``min_size``, if already known."""
     hist = trajectory_history(run, attach=attach, min_size=min_size) if history is None \

@@ -340,7 +340,7 @@ class Backend:
     def checkpoint_state(self) -> dict | None:
         """The state to continue from the last yielded frame, or None if the backend cannot
         checkpoint (then runs are not resumable).  A flat dict of arrays and JSON scalars with
-        at least ``i_out`` (the last frame's index); stored opaquely (:mod:`mdgran.checkpoint`)
+        at least ``i_out`` (the last frame's index); stored opaquely (:mod:`mdgran.output.checkpoint`)
         and handed back to :meth:`frames` as ``resume``."""
         return None
 

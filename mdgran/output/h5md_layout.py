@@ -2,7 +2,7 @@
 groups and datasets of a new file or of one reopened to go on (``docs/output.md``).
 
 Functions of the scene's output settings and the chain's numbering only: the writer
-(:class:`~mdgran.h5md_writer.H5MDWriter`) fills what they create.
+(:class:`~mdgran.output.h5md_writer.H5MDWriter`) fills what they create.
 """
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from .rest_blocks import BLOCK
+from ..rest_blocks import BLOCK
 from .run_record import LEDGER_NAMES
 from .run_environment import software_versions
 

@@ -1,7 +1,7 @@
 """One run's record: frames, contact states, ledger, events, scene and status, in memory.
 
 :class:`Run` is what every later stage reads (analysis, ``budget``, ``compare``, ``study``,
-``sweep``, the paper's figures): it is filled by :class:`~mdgran.memory_reporter.MemoryReporter`
+``sweep``, the paper's figures): it is filled by :class:`~mdgran.output.memory_reporter.MemoryReporter`
 during a run, or read back from an H5MD file by :func:`read_h5` (``mdgran.read``), and it holds
 everything those stages need, so none of them rebuilds the scene or the contact states.
 Everything is nondimensional (docs/physics.md section 1): length ``p``, time ``1/q``, velocity
@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .model.chain import contact_numbers, initial_states, replay_states
+from ..model.chain import contact_numbers, initial_states, replay_states
 
 LEDGER_NAMES = ("kinetic_energy", "contact_energy", "substrate_energy",
                 "dissipated_viscous", "dissipated_hysteresis", "external_work", "total_energy")
@@ -56,8 +56,8 @@ def scene_from_toml(text: str, name: str = "scene"):
     stored ``[material]`` with a diameter but without E, nu, w or density was written by an
     mdgran that took the paper's alumina for them (it stored only what the scene file gave);
     those values are filled in, as that run used them."""
-    from .model.scene import Scene, resolve, tomllib
-    from .model.units import ALUMINA
+    from ..model.scene import Scene, resolve, tomllib
+    from ..model.units import ALUMINA
 
     data = tomllib.loads(text)
     mat = data.get("material")
@@ -104,7 +104,7 @@ class Run:
             of its ``/parameters`` group (versions, units, backend_stats, ``mpi_ranks``, ...).
         path: the file the record was read from (:func:`read_h5`; "" for a run in memory).
         measures: the paper's measures of this run, each computed once
-            (:class:`~mdgran.measures.Measures`).
+            (:class:`~mdgran.output.measures.Measures`).
     """
 
     def __init__(self, time, x, v, ledger, ev_time, ev_contact, ev_kind, scene_toml: str = "",
@@ -185,7 +185,7 @@ class Run:
             return self.scene.data
         if not self.scene_toml:
             return {}
-        from .model.scene import tomllib
+        from ..model.scene import tomllib
 
         return tomllib.loads(self.scene_toml)
 
@@ -276,7 +276,7 @@ class Run:
     @cached_property
     def measures(self):
         """The paper's measures of this run, computed once each on first use
-        (:class:`~mdgran.measures.Measures`)."""
+        (:class:`~mdgran.output.measures.Measures`)."""
         from .measures import Measures
 
         return Measures(self)
