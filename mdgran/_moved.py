@@ -37,6 +37,12 @@ MOVED = {
     "mdgran.h5md_writer": "mdgran.output.h5md_writer",
     "mdgran.memory_reporter": "mdgran.output.memory_reporter",
     "mdgran.reporters": "mdgran.output.reporters",
+    # the studies
+    "mdgran.sweep": "mdgran.studies.sweep",
+    "mdgran.controls": "mdgran.studies.controls",
+    "mdgran.paper_figures": "mdgran.studies.paper_figures",
+    "mdgran.study": "mdgran.studies.paper_study",
+    "mdgran.long_chain": "mdgran.studies.long_chain",
 }
 
 #: files whose frames stand between an ``import`` statement and :class:`MovedFinder`

@@ -226,7 +226,7 @@ def cmd_compare(args) -> int:
 
 def cmd_sweep(args) -> int:
     from .model.scene import parse_override
-    from .sweep import run_sweep, sweep_summary
+    from .studies.sweep import run_sweep, sweep_summary
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
@@ -248,7 +248,7 @@ def cmd_sweep(args) -> int:
 def cmd_report(args) -> int:
     from pathlib import Path
 
-    from .study import make_report
+    from .studies.paper_study import make_report
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
@@ -256,7 +256,7 @@ def cmd_report(args) -> int:
     if args.sweep_dir is not None and not (Path(args.sweep_dir) / "sweep.json").exists():
         raise UsageError(f"--sweep-dir: {args.sweep_dir} holds no sweep.json (a folder written "
                          "by mdgran sweep)")
-    from .study import BEYOND, BEYOND_STUDIES
+    from .studies.paper_study import BEYOND, BEYOND_STUDIES
 
     known = (*BEYOND, *BEYOND_STUDIES)
     beyond = [b.strip() for b in (args.beyond or "").split(",") if b.strip()]

@@ -1,4 +1,4 @@
-"""The controls of the macro/micro comparison (mdgran.controls): the scenes mean what they say,
+"""The controls of the macro/micro comparison (mdgran.studies.controls): the scenes mean what they say,
 and the window arithmetic gives known answers on synthetic curves."""
 import math
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mdgran import controls
+from mdgran.studies import controls
 from mdgran.model.units import scales_from_material
 
 

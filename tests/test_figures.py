@@ -128,7 +128,7 @@ def _tick_sizes(ax):
 
 # ---- paper figures -----------------------------------------------------------------------------
 def test_fig5_draws_no_negative_rate(micro, saved, tmp_path):
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     tr, sc = micro
     pf.fig5(tr, tmp_path / "fig5.png")
@@ -141,7 +141,7 @@ def test_fig5_draws_no_negative_rate(micro, saved, tmp_path):
 
 
 def test_fig_b_colour_bars_shared_x_ticks_and_rates(micro, saved, tmp_path):
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     tr, sc = micro
     # the structure does not depend on the runs: one run labelled as 2 x 2 cases
@@ -246,7 +246,7 @@ def test_controls_figure_leaves_out_a_control_whose_run_failed(tmp_path, monkeyp
     """A sweep of the controls in which macro-si's run failed (its LAMMPS run stopped): the
     figure draws micro-star and the two macro variants that ran, one line each in (b), instead
     of stopping the report on the missing one."""
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     s = np.linspace(0.0, 10.0, 21)
     curves = {"s": s, "micro": np.exp(-0.3 * s), "macro": np.exp(-0.2 * s)}

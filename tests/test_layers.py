@@ -24,7 +24,7 @@ ROOMS = {
     "backends": ["backends"],
     "output": ["output"],
     "driver": ["simulation", "budget"],
-    "study": ["sweep", "controls", "paper_figures", "study", "long_chain"],
+    "studies": ["studies"],
     "crosscheck": ["compare_report", "compare"],
     "front": ["api"],
     "cli": ["cli", "__main__"],

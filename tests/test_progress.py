@@ -139,7 +139,7 @@ def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
 
 
 def test_sweep_names_running_cases_while_they_run(tmp_path):
-    from mdgran.sweep import run_sweep
+    from mdgran.studies.sweep import run_sweep
 
     spec = tmp_path / "slow.toml"
     spec.write_text('[sweep]\nscene = "micro-star"\nbackend = "reference"\n\n[fixed]\n'

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from mdgran.model.scene import SceneError
-from mdgran.study import (interval_over_realizations, realization_groups,
+from mdgran.studies.paper_study import (interval_over_realizations, realization_groups,
                           realization_statistics, realizations_markdown, sweep_cases)
-from mdgran.sweep import load_sweep, run_sweep
+from mdgran.studies.sweep import load_sweep, run_sweep
 
 GRID = """
 [fixed]

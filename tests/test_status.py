@@ -93,7 +93,7 @@ def test_injected_ledger_defect_is_flagged(defect_backend, tmp_path, capsys):
 
 
 def test_sweep_and_report_list_cases_over_their_bound(defect_backend, tmp_path, capsys):
-    from mdgran.study import run_status, status_markdown, sweep_cases
+    from mdgran.studies.paper_study import run_status, status_markdown, sweep_cases
 
     spec = tmp_path / "defect.toml"
     spec.write_text(f'[sweep]\nscene = "micro-star"\nbackend = "{DEFECT}"\n'

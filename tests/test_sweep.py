@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mdgran.model.scene import SceneError
-from mdgran.sweep import load_sweep, run_sweep
+from mdgran.studies.sweep import load_sweep, run_sweep
 
 
 def test_paper_robustness_spec():
@@ -81,7 +81,7 @@ def test_a_sweep_keeps_to_its_scene(tmp_path, monkeypatch):
     scene file changed since the sweep started is refused in one line, and a case started
     after the change fails rather than run another scene (cases of chain.n 10 and 12 were
     mixed in one sweep, all complete)."""
-    from mdgran.sweep import load_sweep, run_case, scene_digest
+    from mdgran.studies.sweep import load_sweep, run_case, scene_digest
 
     folder = tmp_path / "study"
     folder.mkdir()

@@ -38,10 +38,10 @@ def _mpi_sweep(spec, out, ranks=3, extra=(), timeout=240):
 
 
 def test_mpi_sweep_writes_every_case_and_report_uses_them_all(tmp_path, capsys):
-    from mdgran import paper_figures as pf
-    from mdgran import study
+    from mdgran.studies import paper_figures as pf
+    from mdgran.studies import paper_study as study
     from mdgran.cli import main
-    from mdgran.sweep import run_sweep
+    from mdgran.studies.sweep import run_sweep
 
     spec = tmp_path / "eight.toml"
     spec.write_text('[sweep]\nscene = "micro-star"\nbackend = "reference"\n\n[fixed]\n'
