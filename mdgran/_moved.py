@@ -43,6 +43,9 @@ MOVED = {
     "mdgran.paper_figures": "mdgran.studies.paper_figures",
     "mdgran.study": "mdgran.studies.paper_study",
     "mdgran.long_chain": "mdgran.studies.long_chain",
+    # the cross-checks
+    "mdgran.compare_report": "mdgran.crosscheck.compare_report",
+    "mdgran.compare": "mdgran.crosscheck.compare",
 }
 
 #: files whose frames stand between an ``import`` statement and :class:`MovedFinder`

@@ -203,7 +203,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .compare import compare
+    from .crosscheck.compare import compare
 
     check_out_dir(args.out)
     scene = _load(args)

@@ -2,7 +2,7 @@
 reference against LAMMPS, must pass every criterion of the harness."""
 import pytest
 
-from mdgran.compare import compare
+from mdgran.crosscheck.compare import compare
 from mdgran.model.scene import load_scene
 
 

@@ -174,14 +174,14 @@ def _fake_comparison(traj, scene, names=("reference", "fast")):
     """What compare_report._figures gets, built from one short run (second backend: the same
     run; their lines coincide exactly, the case that hid one of them)."""
     from mdgran.analysis.statistics import cluster_lives
-    from mdgran.compare import BackendRuns
+    from mdgran.crosscheck.compare import BackendRuns
 
     err = np.full(len(traj.time), 1e-9)
     runs = [BackendRuns(n, traj, traj, err, 1.0, 0.1, 1e-9, 1e-9, [traj]) for n in names]
     lives = cluster_lives(traj.measures.history)
     horizon = 0.5 * float(traj.time[-1])
     pred = {"time": traj.time, "difference": np.geomspace(1e-14, 1e-2, len(traj.time))}
-    from mdgran.compare import PREDICTABLE, SAFETY
+    from mdgran.crosscheck.compare import PREDICTABLE, SAFETY
 
     report = {"pairs": {n: {"horizon": horizon, "clusters": {"lifetimes": {"pvalue": 0.5}}}
                         for n in names[1:]},
@@ -194,7 +194,7 @@ def _fake_comparison(traj, scene, names=("reference", "fast")):
 @pytest.fixture(scope="module")
 def comparison(request, tmp_path_factory):
     """The comparison figures of each short run, drawn once: ``{"micro"|"hertz": Saved}``."""
-    from mdgran.compare_report import _figures
+    from mdgran.crosscheck.compare_report import _figures
 
     drawn = {}
     for which in ("micro", "hertz"):

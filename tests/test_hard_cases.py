@@ -126,7 +126,7 @@ def test_hard_case_on_fixed_step_backend(backend, name, duration):
     why = _available(backend)
     if why:
         pytest.skip(why)
-    from mdgran.compare import compare_events
+    from mdgran.crosscheck.compare import compare_events
 
     sc = load_scene(name, [("run.duration", duration)])
     res = run(sc, backend)

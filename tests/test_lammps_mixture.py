@@ -177,7 +177,7 @@ def test_compare_passes_reference_fast_and_lammps_on_mixed_scenes(name, backends
     """``mdgran compare`` of reference, fast and LAMMPS on the dimer and intruder scenes to
     t = 60: each backend within its error estimate of the reference to the horizon, events
     matched, ledgers within bounds, cluster statistics past the horizon."""
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     rep = compare(load_scene(name, [("run.duration", 60.0)]), backends, out_dir=tmp_path)
     failed = [c for c in rep["criteria"] if not c["passed"]]

@@ -25,7 +25,7 @@ ROOMS = {
     "output": ["output"],
     "driver": ["simulation", "budget"],
     "studies": ["studies"],
-    "crosscheck": ["compare_report", "compare"],
+    "crosscheck": ["crosscheck"],
     "front": ["api"],
     "cli": ["cli", "__main__"],
 }

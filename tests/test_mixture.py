@@ -363,7 +363,7 @@ def test_compare_passes_reference_against_fast_on_mixed_scenes(name, tmp_path):
     """``mdgran compare`` of reference and fast on the dimer and intruder scenes to t = 60:
     trajectories within the error estimates to the horizon, events matched (or undecidable
     at the backends' accuracy), ledgers within bounds, cluster statistics past the horizon."""
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     rep = compare(load_scene(name, [("run.duration", 60.0)]), ("reference", "fast"),
                   out_dir=tmp_path)

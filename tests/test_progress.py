@@ -117,7 +117,7 @@ def test_narrow_terminal_lines_fit_and_keep_their_role():
 
 @pytest.mark.parametrize("tty", [False, True])
 def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     monkeypatch.setenv("COLUMNS", "200")
     out = FakeTTY() if tty else io.StringIO()

@@ -121,7 +121,7 @@ def test_sweep_and_report_list_cases_over_their_bound(defect_backend, tmp_path, 
 
 
 def test_compare_does_not_pass_a_run_over_its_bound(defect_backend):
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     sc = load_scene("micro-star", [("run.duration", 10.0)])
     rep = compare(sc, ("reference", DEFECT), ensemble=0)
