@@ -4,8 +4,8 @@ for one or two source trees ("the 91-case sweep takes what its kernels take").
 
 Each tree runs in a fresh process (``PYTHONPATH`` = the tree): one warm-up case (imports, the
 compiled kernel's loading; its CPU time is ``first_case_ms``), then cases 40-59, each through
-the sweep worker's own call (``mdgran.studies.sweep._call_case``, so what a worker does between cases
-is in it).  Times are CPU times (``time.process_time``: less sensitive to other processes than
+the sweep worker's own call (``mdgran.studies.sweep._call_case``, so what a worker does between
+cases is in it).  Times are CPU times (``time.process_time``: less sensitive to other processes than
 wall times), in ms per case:
 
 * ``kernel``: the compiled stepping loop (``kernel_s``, made a CPU time by pointing the fast

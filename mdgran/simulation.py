@@ -134,8 +134,8 @@ def available_memory() -> float | None:
 def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
-    H5MD writer's buffer (:func:`~mdgran.output.h5md_layout.buffer_frames` frames of x and v and their
-    copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
+    H5MD writer's buffer (:func:`~mdgran.output.h5md_layout.buffer_frames` frames of x and v and
+    their copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
     with ``output.contacts``; of the stored beads, ``output.bead_stride``),
     the frames kept
     in memory (``keep``: x and v, and the copies made for the trajectory, plus the frame's

@@ -20,8 +20,8 @@ What "identical" means per file type:
 JSON strings holding the folder's own path (``report.json``'s ``sweep.dir``) are compared with
 it replaced.  Besides the identity check: where an H5 file of AFTER stores the contact states
 (``/observables/contacts/closed``), they are checked against its events replayed
-(:func:`mdgran.model.chain.replay_states`) and a frame where they differ is listed (``STATES``); this
-does not change the exit status.
+(:func:`mdgran.model.chain.replay_states`) and a frame where they differ is listed (``STATES``);
+this does not change the exit status.
 
 Exit status 0 when every file of BEFORE has an identical counterpart in AFTER, 1 otherwise.  The
 script prints one line per file that differs and a summary count per type.

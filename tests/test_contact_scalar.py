@@ -72,7 +72,8 @@ def test_hertz_scalar_law():
 
 def test_cxx_constants_header_is_generated_from_the_python_constants():
     """law_constants.h, which the C++ fix includes, is cxx_header()'s text (regenerate it
-    with ``python -m mdgran.model.contact_scalar``), and it holds the values the Python side uses."""
+    with ``python -m mdgran.model.contact_scalar``), and it holds the values the Python side
+    uses."""
     header = (Path(contact_scalar.__file__).parents[1] / "backends" / "lammps" / "fix"
               / contact_scalar.CXX_HEADER)
     text = header.read_text()

@@ -1,5 +1,5 @@
-"""The controls of the macro/micro comparison (mdgran.studies.controls): the scenes mean what they say,
-and the window arithmetic gives known answers on synthetic curves."""
+"""The controls of the macro/micro comparison (mdgran.studies.controls): the scenes mean what they
+say, and the window arithmetic gives known answers on synthetic curves."""
 import math
 
 import numpy as np

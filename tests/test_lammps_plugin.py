@@ -140,7 +140,8 @@ def test_tether_and_integrate_are_the_lammps_fixes_bitwise(plugin, tmp_path):
 
 def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
     """mpiexec -n 2 with the backend's input (one slab of the chain per rank): as serial."""
-    code = ("import sys; from mdgran.model.scene import load_scene; from mdgran.simulation import run; "
+    code = ("import sys; from mdgran.model.scene import load_scene; "
+            "from mdgran.simulation import run; "
             "run(load_scene('micro-star', [('run.duration', 2.0)]), 'lammps', "
             "contact='native', out=sys.argv[1], checkpoint_every=None)")
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))

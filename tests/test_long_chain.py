@@ -1,5 +1,5 @@
-"""The primary pulse in long chains (mdgran.studies.long_chain): the tracker against the frames it saw,
-the beads' energies against the ledger, and the measures against chain length."""
+"""The primary pulse in long chains (mdgran.studies.long_chain): the tracker against the frames it
+saw, the beads' energies against the ledger, and the measures against chain length."""
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st

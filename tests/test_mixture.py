@@ -1,5 +1,5 @@
-"""Chains of unlike beads ([beads], [striker]; mdgran.model.mixture): each pair's law, the start from
-equilibrium, and runs of the reference backend against analytic results: the restitution of an
+"""Chains of unlike beads ([beads], [striker]; mdgran.model.mixture): each pair's law, the start
+from equilibrium, and runs of the reference backend against analytic results: the restitution of an
 unlike pair, a striker's elastic collision, the modes of a dimer chain, a light intruder's
 localized mode.  The expected values are computed here from the paper's formulas and the
 homogeneous law (contact.ContactLaw), not from mdgran.model.mixture."""

@@ -1,4 +1,5 @@
-"""mdgran.output.storage's atomic write: the whole new text in place of the old, no temporary left."""
+"""mdgran.output.storage's atomic write: the whole new text in place of the old, no temporary
+left."""
 import os
 
 import pytest

@@ -2,8 +2,8 @@
 
 Every test runs ``python -m mdgran sweep`` as a subprocess.  Faults are put into the workers by
 a ``sitecustomize`` module that the test writes and puts on the subprocess's PYTHONPATH (test
-code only: the library has no fault switch): it wraps ``mdgran.studies.sweep.run_case`` so that chosen
-cases raise, kill their own worker with SIGKILL, or sleep first (slow cases, for signals sent
+code only: the library has no fault switch): it wraps ``mdgran.studies.sweep.run_case`` so that
+chosen cases raise, kill their own worker with SIGKILL, or sleep first (slow cases, for signals sent
 mid-sweep).  Worker pids are read from /proc (the main process's children), not from psutil.
 """
 import json

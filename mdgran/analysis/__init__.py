@@ -11,8 +11,8 @@ Modules, one idea each (all nondimensional, bead mass 1, time in 1/q, energy in 
 * :mod:`.coincidence`: do C_eff peaks coincide with re-clustering-rate peaks?
 * :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives.
 
-:func:`run_summary` condenses a run into scalars for :mod:`mdgran.studies.sweep`.  The functions of a
-whole run take a :class:`~mdgran.output.run_record.Run` (its scene, contact states and events come
+:func:`run_summary` condenses a run into scalars for :mod:`mdgran.studies.sweep`.  The functions of
+a whole run take a :class:`~mdgran.output.run_record.Run` (its scene, contact states and events come
 with it); ``run.measures`` (:class:`~mdgran.output.measures.Measures`) computes each measure once.
 """
 from __future__ import annotations

@@ -33,7 +33,8 @@ SPEC_WORDS = {
 
 
 #: option -> (kind, what is allowed): the options a spec or a keyword may give a backend, checked
-#: as scene keys are (:mod:`mdgran.model.scene`'s kinds; ``OPTION_LIMITS`` bounds numbers) before the
+#: as scene keys are (:mod:`mdgran.model.scene`'s kinds; ``OPTION_LIMITS`` bounds numbers) before
+# the
 #: backend is built; options that are objects (``comm``, ``extra_commands``, ``table_file``)
 #: are the backend's to check, and one a backend does not take is refused by it
 OPTION_RULES = {

@@ -5,8 +5,8 @@ yields one :class:`Frame` per stored output time, the first at ``t = 0``;
 ``backend.blocks()`` yields the same frames as blocks of consecutive ones (:class:`Frames`),
 which the driver iterates.  Each frame carries
 the contact events since the previous frame.  The ledger (energies) is computed from the frame
-by the shared :class:`~mdgran.model.chain.ChainModel`, so every backend's ledger means the same thing.
-Writing output, progress and energy checks are reporters (see :mod:`mdgran.simulation`), not
+by the shared :class:`~mdgran.model.chain.ChainModel`, so every backend's ledger means the same
+thing. Writing output, progress and energy checks are reporters (see :mod:`mdgran.simulation`), not
 the backend's business.
 """
 from __future__ import annotations
@@ -152,7 +152,8 @@ class Frames:
         return self._contacts
 
     def ledger_row(self, k: int) -> dict:
-        """Frame ``k``'s ledger as :meth:`~mdgran.model.chain.ChainModel.ledger` gives it (floats)."""
+        """Frame ``k``'s ledger as :meth:`~mdgran.model.chain.ChainModel.ledger` gives it
+        (floats)."""
         if self._rows is None:
             led = self.ledger()
             names = tuple(led)
@@ -182,7 +183,8 @@ MIN_STEPS = 10
 
 def steps_per_frame(dt: float, interval: float) -> int:
     """Steps of ``dt`` in one output interval ``run.output_interval`` (same time unit), which
-    ``dt`` must divide to a relative 1e-9; else :class:`~mdgran.model.scene.SceneError` on ``run.dt``."""
+    ``dt`` must divide to a relative 1e-9; else :class:`~mdgran.model.scene.SceneError` on
+    ``run.dt``."""
     from ..model.scene import SceneError
 
     steps = int(round(interval / dt))
@@ -340,8 +342,8 @@ class Backend:
     def checkpoint_state(self) -> dict | None:
         """The state to continue from the last yielded frame, or None if the backend cannot
         checkpoint (then runs are not resumable).  A flat dict of arrays and JSON scalars with
-        at least ``i_out`` (the last frame's index); stored opaquely (:mod:`mdgran.output.checkpoint`)
-        and handed back to :meth:`frames` as ``resume``."""
+        at least ``i_out`` (the last frame's index); stored opaquely
+        (:mod:`mdgran.output.checkpoint`) and handed back to :meth:`frames` as ``resume``."""
         return None
 
     @property

@@ -304,9 +304,9 @@ class FastBackend(Backend):
                                f"t = {t:.12g}, contact {num}")
 
     def checkpoint_state(self) -> dict | None:
-        """The state at the last yielded frame (stored opaquely by :mod:`mdgran.output.checkpoint`): ``y`` =
-        ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
-        so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
+        """The state at the last yielded frame (stored opaquely by :mod:`mdgran.output.checkpoint`):
+        ``y`` = ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's
+        own, so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
         ``closed``, ``d_hyst``, ``i_out``; None before the first frame."""
         if getattr(self, "_last", None) is None:
             return None

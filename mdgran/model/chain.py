@@ -16,9 +16,9 @@ closed contact (law force plus unilateral damping ``c * d delta/dt``; zero when 
 
 Terms switched off by the scene (``k1 = 0``, ``k3 = 0``, ``damping = 0``) are not evaluated.
 
-**Unlike beads** (``mixture``, :class:`mdgran.model.mixture.Mixture`): bead ``i`` has mass ``m_i`` and
-substrate factor ``g_i``, contact ``k`` its own law ``F_k`` (in the reference bead's units); with
-the substrate's damping ``c_s`` (``substrate.damping``, dissipation booked as viscous)::
+**Unlike beads** (``mixture``, :class:`mdgran.model.mixture.Mixture`): bead ``i`` has mass ``m_i``
+and substrate factor ``g_i``, contact ``k`` its own law ``F_k`` (in the reference bead's units);
+with the substrate's damping ``c_s`` (``substrate.damping``, dissipation booked as viscous)::
 
     m_i x_i'' = F_i - F_(i+1) - g_i (k1 x_i + k3 x_i^3 + c_s x_i')
 

@@ -290,8 +290,8 @@ class ContactLaw:
 
     @property
     def constants(self) -> SchwarzConstants:
-        """The constants the scalar laws read (:func:`~mdgran.model.contact_scalar.schwarz_constants`;
-        zeros for Hertz)."""
+        """The constants the scalar laws read
+        (:func:`~mdgran.model.contact_scalar.schwarz_constants`; zeros for Hertz)."""
         return schwarz_constants(self)
 
     def force(self, delta):

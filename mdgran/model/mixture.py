@@ -223,8 +223,8 @@ def _each(f, *values):
 def modulus_ratios(E, nu, K0: float, convention: str = "table"):
     """Contact-modulus ratios ``k_i = K_ii / K0`` of beads of Young's modulus ``E`` (Pa) and
     Poisson's ratio ``nu`` (each a number or a list of n), ``K_ii`` the ``K`` of two beads of
-    bead ``i``'s material by ``convention`` (:func:`mdgran.model.units.contact_modulus`), ``K0`` (Pa)
-    the reference pair's.
+    bead ``i``'s material by ``convention`` (:func:`mdgran.model.units.contact_modulus`), ``K0``
+    (Pa) the reference pair's.
 
     Both conventions are ``K = c E*`` with the Hertz effective modulus of the pair,
     ``1/E* = (1 - nu_i^2)/E_i + (1 - nu_j^2)/E_j`` (``c = 1`` "table", ``4/3`` "text"), so

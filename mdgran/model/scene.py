@@ -22,8 +22,9 @@ nondimensional ``beads.mass`` sets ``beads.density``.
 ``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
 ("table", default, or "text") and ``D0`` (m, default 0.165e-9, the paper's) have defaults.
 It then sets ``contact.lambda`` too (its Maugis parameter,
-:attr:`mdgran.model.units.Scales.maugis_lambda`), unless the scene gives ``contact.lambda`` or ``contact.fc`` itself.  Where each
-value came from is in :attr:`Scene.sources` (and ``lambda_source`` in ``mdgran info``).
+:attr:`mdgran.model.units.Scales.maugis_lambda`), unless the scene gives ``contact.lambda`` or
+``contact.fc`` itself.  Where each value came from is in :attr:`Scene.sources` (and
+``lambda_source`` in ``mdgran info``).
 
 **Limits** (:data:`LIMITS`).  Besides being finite, a few values have ranges outside which the
 backends cannot work or the numbers are not representable; they are checked on the
@@ -1182,7 +1183,8 @@ def key_reference() -> str:
         "[the physics, section 1](physics.md#1-scales-and-units): force",
         "`eta = pi R w`, length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1;",
         "\"-\" is a pure number. Values must also be finite; \"range\" is what the checks in",
-        "`mdgran/model/scene.py` allow (an SI key's converted value must fit its plain key's range).",
+        "`mdgran/model/scene.py` allow (an SI key's converted value must fit its plain key's",
+        "range).",
         "",
     ]
     for sec, keys in SCHEMA.items():

@@ -7,7 +7,8 @@ The driver (:func:`mdgran.simulation.run`) hands every block of frames to each r
 ``"interrupted"``).  This module gathers the package's reporters:
 
 * :class:`~mdgran.output.h5md_writer.H5MDWriter` writes the contract's H5MD file atomically (its
-  layout: :mod:`mdgran.output.h5md_layout`; the checkpoints it stores: :mod:`mdgran.output.checkpoint`).
+  layout: :mod:`mdgran.output.h5md_layout`; the checkpoints it stores:
+  :mod:`mdgran.output.checkpoint`).
 * :class:`~mdgran.output.memory_reporter.MemoryReporter` collects a
   :class:`~mdgran.output.run_record.Run` (with the contacts' states per frame).
 * :class:`~mdgran.output.progress.ProgressReporter` draws a labelled progress bar on stderr.

@@ -1,11 +1,12 @@
 """One run's record: frames, contact states, ledger, events, scene and status, in memory.
 
 :class:`Run` is what every later stage reads (analysis, ``budget``, ``compare``, ``study``,
-``sweep``, the paper's figures): it is filled by :class:`~mdgran.output.memory_reporter.MemoryReporter`
-during a run, or read back from an H5MD file by :func:`read_h5` (``mdgran.read``), and it holds
-everything those stages need, so none of them rebuilds the scene or the contact states.
-Everything is nondimensional (docs/physics.md section 1): length ``p``, time ``1/q``, velocity
-``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass 1).
+``sweep``, the paper's figures): it is filled by
+:class:`~mdgran.output.memory_reporter.MemoryReporter` during a run, or read back from an H5MD file
+by :func:`read_h5` (``mdgran.read``), and it holds everything those stages need, so none of them
+rebuilds the scene or the contact states. Everything is nondimensional (docs/physics.md section 1):
+length ``p``, time ``1/q``, velocity ``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass
+1).
 """
 from __future__ import annotations
 

@@ -100,8 +100,8 @@ def compare_decay(micro, macro, step: float = 0.05) -> dict:
 
 
 def cluster_activity(run) -> dict:
-    """How much a chain (a :class:`~mdgran.output.run_record.Run`) clusters: new clusters formed, and
-    the time of the last re-clustering event, in units of its own ``T_c``."""
+    """How much a chain (a :class:`~mdgran.output.run_record.Run`) clusters: new clusters formed,
+    and the time of the last re-clustering event, in units of its own ``T_c``."""
     from ..analysis import reclustering_events
 
     tc = run.measures.characteristic_period

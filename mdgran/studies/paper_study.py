@@ -13,8 +13,8 @@ What it does, reusing whatever ``DIR`` already holds (so a second call only redr
    error exceeded its backend's declared bound, or it failed): their numbers are in the
    figures and tables but are not to be trusted.
 
-**Realizations.**  A sweep run with ``[sweep] realizations = K`` (:mod:`mdgran.studies.sweep`) holds K
-realizations of each grid point.  The figures and sections pool them all; report.md's
+**Realizations.**  A sweep run with ``[sweep] realizations = K`` (:mod:`mdgran.studies.sweep`) holds
+K realizations of each grid point.  The figures and sections pool them all; report.md's
 "Realizations" section gives every statistic of the study (Fig. 7 slope after the impact
 transient, pooled coincidence fraction and its z at T_c / 4 in the active part, the z of each
 null model of :func:`null_models`, with smaller shuffle counts) computed on each realization
@@ -52,8 +52,8 @@ BEYOND_STUDIES = ("long-chain",)
 def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None,
                label: str | None = None):
     """The run ``out/NAME.h5`` (made if missing), as read back from the file (a
-    :class:`~mdgran.output.run_record.Run`, its scene the stored one); ``label``: its progress line's
-    label (default the scene and backend)."""
+    :class:`~mdgran.output.run_record.Run`, its scene the stored one); ``label``: its progress
+    line's label (default the scene and backend)."""
     from ..simulation import run
 
     scene = load_scene(name, [] if duration is None else [("run.duration", float(duration))])
@@ -134,8 +134,8 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
 def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     """Every finished case of a sweep folder: params, the scene stored in its run file, a lazy
     loader of its :class:`~mdgran.output.run_record.Run` (``"run"``), and its measures
-    (:class:`~mdgran.output.measures.Measures`: the summary recomputed with the current analysis code,
-    the C_eff and rate curves, the channels, segments and null-model case).  A folder with
+    (:class:`~mdgran.output.measures.Measures`: the summary recomputed with the current analysis
+    code, the C_eff and rate curves, the channels, segments and null-model case).  A folder with
     cases missing their files is refused (:func:`check_sweep_files`); a case that failed
     without an ``.h5`` is left out here (the report names it in its run status)."""
     check_sweep_files(sweep_dir, key)
@@ -776,7 +776,8 @@ def paper_details_markdown(pd: dict) -> list:
 
 
 def controls_markdown(ctl: dict) -> list:
-    """report.md's section on the controls of the macro/micro comparison (mdgran.studies.controls)."""
+    """report.md's section on the controls of the macro/micro comparison
+    (mdgran.studies.controls)."""
     L = ["## What survives: the controls of the macro/micro comparison", "",
          "The paper matches its macro chain to the micro chain by equal primary-pulse speed in "
          "nondimensional units. Two controls: the macro chain struck at the micro chain's "

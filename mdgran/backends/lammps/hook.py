@@ -22,8 +22,8 @@ Per contact ``k`` (left atom tag ``k``, right ``k + 1``; compression
   atom records the event with its time interpolated linearly in ``delta`` within the step
   and, on opening, the energy ``V(delta)`` lost to hysteresis;
 * a closed contact's force ``F = f(delta) + c rate`` (``f`` from the spline table of
-  :class:`mdgran.model.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the right
-  atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3`` and the
+  :class:`mdgran.model.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the
+  right atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3`` and the
   linear substrate ``-k u`` (chain.in's ``fix spring/self``, which the backend removes: its
   per-atom ``domain->unmap`` call cost ~5 ns per bead-step; ``k`` is that fix's stiffness,
   :func:`tether_stiffness`, and LAMMPS's force the same number, ``0 + (F - k u)`` against

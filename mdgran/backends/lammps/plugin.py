@@ -155,9 +155,9 @@ def load_commands(path=None) -> list[str]:
 
 
 def write_spline(table, path):
-    """The force spline of a :class:`mdgran.model.contact.ContactTable` for ``fix mdgran/chain table``:
-    its locating constants and the ``(n - 1) x 4`` coefficients, each as ``repr`` (17 digits at
-    most, read back exactly), so the fix evaluates the very numbers the hook does."""
+    """The force spline of a :class:`mdgran.model.contact.ContactTable` for ``fix mdgran/chain
+    table``: its locating constants and the ``(n - 1) x 4`` coefficients, each as ``repr`` (17
+    digits at most, read back exactly), so the fix evaluates the very numbers the hook does."""
     with open(path, "w") as fh:
         fh.write(f"# mdgran contact spline: {table.law}\nMDGRAN_SPLINE_W\nn {table.n}\n"
                  f"base {float(table.base)!r}\nscale {float(table._scale)!r}\n"
