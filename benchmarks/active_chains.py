@@ -50,7 +50,7 @@ QUIET, ACTIVE = 1e-6, 2.0  # temperatures of the quiet chain stepped whole and t
 
 
 def scene_for(n: int, temperature: float, steps: int, blocks: int):
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
 
     return load_scene("micro-star", [
         ("chain.n", n), ("run.dt", DT), ("run.output_interval", steps * DT),

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 CASES = [(20, 4000), (10_000, 400), (100_000, 100)]

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from mdgran.backends.lammps import LammpsBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 
 STEPS = {10_000: 1000, 100_000: 300, 1_000_000: 100}
 

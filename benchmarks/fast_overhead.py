@@ -53,7 +53,7 @@ MICRO_STAR = r"""
 import json, sys, time
 t0 = time.perf_counter()
 from mdgran.backends.fast import FastBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 t1 = time.perf_counter()
 dt, mode = float(sys.argv[1]), sys.argv[2]
@@ -93,7 +93,7 @@ PER_BEAD = r"""
 import json, sys, time
 import numpy as np
 from mdgran.backends.fast import FastBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 name, n, repeats, bead_steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 dt = 0.0025
 steps = int(np.clip(bead_steps // n, 20, 400000))

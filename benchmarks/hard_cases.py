@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.scene import builtin_scenes, load_scene
+from mdgran.model.scene import builtin_scenes, load_scene
 from mdgran.simulation import run
 
 SHORT = {"hard/dmt": 100.0, "hard/near-dmt": 100.0, "hard/violent-50": 30.0,

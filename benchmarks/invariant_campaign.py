@@ -46,8 +46,8 @@ from pathlib import Path
 import numpy as np
 
 import mdgran
-from mdgran.contact import law_from_contact_table
-from mdgran.scene import load_scene
+from mdgran.model.contact import law_from_contact_table
+from mdgran.model.scene import load_scene
 from mdgran.simulation import LEDGER_EXCEEDED
 
 from invariants import check_run, matched_events  # benchmarks/invariants.py

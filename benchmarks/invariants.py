@@ -154,7 +154,7 @@ def check_run(scene, backend: str, tol: float = STATE_TOL, hyst_rtol: float = 1e
     and so is ``status``; at the end :func:`hysteresis_check` at ``hyst_rtol``.  A run that
     raises anything else is recorded as ``"error: ..."`` with the frames checked so far.
     """
-    from mdgran.chain import model_from_scene
+    from mdgran.model.chain import model_from_scene
     from mdgran.simulation import run
 
     res = RunCheck(backend)

@@ -4,7 +4,7 @@ built with the system C compiler, beside the numba kernel on the same states.
 
 * **Same work.**  The C reads the state the fast backend starts from (after its initial settle
   and ``init_acc``): constants, the real spline coefficients of
-  :class:`mdgran.contact.ContactTable`, ``x, v, a``, the contact states (:func:`dump_state`).
+  :class:`mdgran.model.contact.ContactTable`, ``x, v, a``, the contact states (:func:`dump_state`).
   ``check`` runs both for ``CHECK_STEPS`` steps on a 20-bead chain with a gentle impulse in
   the middle (no event, no flag: the C does not locate events) and reports the largest
   difference of ``x, v, a`` and ``D_viscous`` (0: the same operations in the same order).
@@ -81,7 +81,7 @@ def backend(name: str, n: int, steps: int, frames: int, overrides=(), **options)
     ``frames`` frames after the first, one thread, and its frame generator advanced past
     frame 0."""
     from mdgran.backends.fast import FastBackend
-    from mdgran.scene import SceneError, load_scene
+    from mdgran.model.scene import SceneError, load_scene
 
     scene = load_scene(name, [("chain.n", n), ("run.dt", DT),
                               ("run.output_interval", steps * DT),

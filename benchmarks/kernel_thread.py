@@ -72,7 +72,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
 
     result = {"benchmark": "fast backend: next kernel call on a thread vs in line",
               "cpus": os.cpu_count(), "cpus_usable": len(os.sched_getaffinity(0)),

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from mdgran.backends.lammps.env import lammps_version
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 import native_lammps as nl  # benchmarks/native_lammps.py

@@ -62,7 +62,7 @@ def steps_for(n: int, bead_steps: float) -> int:
 
 def worker(n: int, mode: str, steps: int, repeats: int, report_dir: str):
     from mdgran.backends.lammps import LammpsBackend
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
 
     sc = load_scene("micro-star", [("chain.n", n), ("run.dt", DT),
                                    ("run.duration", steps * DT),

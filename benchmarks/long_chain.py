@@ -41,7 +41,7 @@ OUT = HERE / "results" / "long_chain.json"
 def worker(n, velocity, duration, interval, report, backend="fast"):
     import resource
 
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     def scene(n, duration):

@@ -44,7 +44,7 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 from mdgran.backends.fast import FastBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 n, repeats, bead_steps = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 overrides = json.loads(sys.argv[4])
 threads = int(sys.argv[5])

@@ -51,9 +51,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mdgran.backends.base import steps_per_frame
-from mdgran.contact import FC_DMT, FC_JKR, ContactLaw
+from mdgran.model.contact import FC_DMT, FC_JKR, ContactLaw
 from mdgran.backends.lammps.env import new_lammps
-from mdgran.units import ALUMINA, Scales, contact_modulus
+from mdgran.model.units import ALUMINA, Scales, contact_modulus
 
 #: Bead used when a scene has no [material] table (paper's micro bead).
 DEFAULT_DIAMETER = 2.5e-6
@@ -291,7 +291,7 @@ def probe_force(scene, deltas, mapping: NativeMapping | None = None):
     visited in the given order starting from a touching pair, so a decreasing sequence follows
     the attached branch through the tensile region until LAMMPS lets go).  Returns the
     repulsive force / eta at each point (0 where LAMMPS reports no contact)."""
-    from mdgran.scene import Scene, resolve
+    from mdgran.model.scene import Scene, resolve
 
     data = {k: dict(v) for k, v in scene.data.items()}
     data["chain"].update(n=2, boundary="free", initial_gap=0.0)

@@ -47,9 +47,9 @@ CASES = {  # name -> output keys
 
 ONE_RUN = r"""
 import json, sys, time
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
-from mdgran.reporters import H5MDWriter
+from mdgran.output.reporters import H5MDWriter
 keys, out = json.loads(sys.argv[1]), sys.argv[2] or None
 spent = [0.0]
 def timed(method):

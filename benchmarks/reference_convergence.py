@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 RESULTS = Path(__file__).parent / "results"

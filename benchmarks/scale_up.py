@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from mdgran.backends.fast import FastBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 OUT = Path(__file__).resolve().parent / "results" / "scale_up.json"

@@ -29,7 +29,7 @@ BEAD_STEPS_PER_REPEAT = 2e6
 
 
 def worker(n: int, repeats: int, report_dir: str):
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import make_backend, mpi_rank
 
     dt = 0.0025

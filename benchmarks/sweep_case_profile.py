@@ -4,8 +4,8 @@ for one or two source trees ("the 91-case sweep takes what its kernels take").
 
 Each tree runs in a fresh process (``PYTHONPATH`` = the tree): one warm-up case (imports, the
 compiled kernel's loading; its CPU time is ``first_case_ms``), then cases 40-59, each through
-the sweep worker's own call (``mdgran.sweep._call_case``, so what a worker does between cases
-is in it).  Times are CPU times (``time.process_time``: less sensitive to other processes than
+the sweep worker's own call (``mdgran.studies.sweep._call_case``, so what a worker does between
+cases is in it).  Times are CPU times (``time.process_time``: less sensitive to other processes than
 wall times), in ms per case:
 
 * ``kernel``: the compiled stepping loop (``kernel_s``, made a CPU time by pointing the fast
@@ -13,7 +13,7 @@ wall times), in ms per case:
 * ``frames_outside_kernel``: the rest of the backend's frame loop, which includes the driver's
   and the reporters' per-frame work (the backend's ``wall_time_s`` minus ``kernel_s``);
 * ``backend_init``, ``writer_init``, ``writer_close`` (the buffered frames' appends, flush,
-  rename), ``memory_record``, ``summary`` (:func:`mdgran.sweep.case_summary`), ``scene``
+  rename), ``memory_record``, ``summary`` (:func:`mdgran.studies.sweep.case_summary`), ``scene``
   (load_scene), ``json`` (the summary file), ``check_resources``;
 * ``other``: the case's total minus all of the above.
 
@@ -41,7 +41,7 @@ OUT = HERE / "results" / "sweep_case_profile.json"
 
 CHILD = r'''
 import collections, functools, json, os, shutil, sys, tempfile, time, types
-import mdgran.sweep as S, mdgran.simulation as sim, mdgran.reporters as R
+import mdgran.studies.sweep as S, mdgran.simulation as sim, mdgran.output.reporters as R
 import mdgran.backends.fast as F
 F._time = types.SimpleNamespace(perf_counter=time.process_time)  # kernel_s as CPU time
 acc = collections.Counter()

@@ -171,7 +171,7 @@ def main(argv=None):
               "runs": {f"{k} W={w}": [] for w in args.workers for k in trees},
               "identity": []}
     for tree in trees.values():  # compile / load the kernel's variants outside the timings
-        subprocess.run([sys.executable, "-c", "from mdgran.scene import load_scene;"
+        subprocess.run([sys.executable, "-c", "from mdgran.model.scene import load_scene;"
                         "from mdgran.simulation import run;"
                         "run(load_scene('micro-star', [('run.duration', 1.0)]), 'fast')"],
                        env=dict(os.environ, PYTHONPATH=str(tree)), check=True, cwd="/tmp")

@@ -31,7 +31,7 @@ off a power-law fit of time against ledger error through its points (``extrapola
 For each fixed-step method the summary also gives the ledger error at the scene's own ``run.dt``
 and the predictability horizon as ``mdgran compare`` finds it: the first output time where the
 method's own error estimate, ``2^p / (2^p - 1) max_i |x_dt - x_dt/2|`` (Richardson, order ``p``
-of the method as declared), exceeds ``mdgran.compare.PREDICTABLE`` (0.01 p).
+of the method as declared), exceeds ``mdgran.crosscheck.compare.PREDICTABLE`` (0.01 p).
 
 Writes benchmarks/results/work_precision.json and work_precision.png (``--stem`` another name:
 ``python benchmarks/work_precision.py --methods native,native-quantized,lammps --repeat 1
@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.compare import PREDICTABLE
-from mdgran.scene import load_scene
+from mdgran.crosscheck.compare import PREDICTABLE
+from mdgran.model.scene import load_scene
 from mdgran.simulation import BackendUnavailable, run
 
 RESULTS = Path(__file__).parent / "results"

@@ -81,12 +81,13 @@ nitpick_ignore = [
 # reference to the package-level name resolves to that place.
 PUBLIC = {f"mdgran.{name}": f"mdgran.{module}.{attr}"
           for name, (module, attr) in mdgran._LAZY.items()}
+MOVED = mdgran._moved.MOVED
 
 
 def defined_at(target: str, module: str | None) -> str | None:
     """Where the object that ``target`` names (from inside ``module``) is defined, as
     ``module.qualname``: ``SceneError`` written in :mod:`mdgran.simulation`, which imports it,
-    is ``mdgran.scene.SceneError``.  None if it names nothing importable."""
+    is ``mdgran.model.scene.SceneError``.  None if it names nothing importable."""
     import importlib
 
     if target in PUBLIC:
@@ -112,12 +113,25 @@ def defined_at(target: str, module: str | None) -> str | None:
     return None
 
 
+def moved_name(target: str) -> str | None:
+    """``target`` with a moved module's old name (``mdgran.chain.ChainModel``) replaced by the
+    module's new one (``mdgran.model.chain.ChainModel``; the table of :mod:`mdgran._moved`);
+    None if it names no moved module."""
+    for old, new in MOVED.items():
+        if target == old or target.startswith(old + "."):
+            return new + target[len(old):]
+    return None
+
+
 def resolve_where_defined(app, env, node, contnode):
     """``missing-reference`` handler: a Python name that is imported or re-exported where
-    the reference is written resolves to where it is defined and documented."""
+    the reference is written, or named by a moved module's old path, resolves to where it is
+    defined and documented."""
     if node.get("refdomain") != "py":
         return None
-    canonical = defined_at(node.get("reftarget", ""), node.get("py:module"))
+    target = node.get("reftarget", "")
+    moved = moved_name(target)
+    canonical = defined_at(moved or target, node.get("py:module")) or moved
     if canonical is None:
         return None
     domain = env.get_domain("py")

@@ -11,7 +11,7 @@ Example::
 Everything is nondimensional (docs/physics.md section 1): length ``p``, force ``eta = pi R w``,
 time ``1/q``, bead mass 1, energy ``eta p``.  Errors name this module's parameters (``scene``,
 ``backend``, ``out``, ``set``, ...), not the command line's flags: bad input raises
-:class:`~mdgran.scene.SceneError` (a ``ValueError``) or ``TypeError`` before anything runs.
+:class:`~mdgran.model.scene.SceneError` (a ``ValueError``) or ``TypeError`` before anything runs.
 The heavy modules (numpy, scipy, h5py) are imported when a function is called, not when
 ``mdgran`` is imported.
 """
@@ -26,16 +26,16 @@ RUN_KEYWORDS = ("set", "progress", "keep", "reporters", "raise_errors", "checkpo
 
 def scenes() -> list:
     """Names of the built-in scenes (``mdgran scenes`` prints them with a description)."""
-    from .scene import builtin_scenes
+    from .model.scene import builtin_scenes
 
     return list(builtin_scenes())
 
 
 def read(path):
-    """The :class:`~mdgran.run_record.Run` stored in an mdgran H5MD file ``path`` (written by
+    """The :class:`~mdgran.output.run_record.Run` stored in an mdgran H5MD file ``path`` (written by
     ``mdgran.run(..., out=path)`` or ``mdgran run --out path``): frames, contact states,
     ledger, events, the stored scene and status."""
-    from .run_record import read_h5
+    from .output.run_record import read_h5
 
     return read_h5(os.fspath(path))
 
@@ -44,7 +44,7 @@ def _overrides(given) -> list:
     """``set=`` as ``(key, value)`` pairs.  Accepted: None; a mapping ``{"run.duration": 50}``
     or nested ``{"run": {"duration": 50}}``; an iterable of ``(key, value)`` pairs or of
     ``"KEY=VALUE"`` strings (the command line's ``--set`` syntax)."""
-    from .scene import SceneError, parse_override
+    from .model.scene import SceneError, parse_override
 
     if given is None:
         return []
@@ -79,19 +79,19 @@ def _overrides(given) -> list:
 
 
 def as_scene(scene, overrides=()):
-    """A resolved :class:`~mdgran.scene.Scene` from a built-in name, a path to a TOML file, a
+    """A resolved :class:`~mdgran.model.scene.Scene` from a built-in name, a path to a TOML file, a
     nested mapping with the TOML's keys, or a Scene, with ``(key, value)`` overrides (what
-    :func:`~mdgran.scene.load_scene` takes)."""
-    from .scene import load_scene
+    :func:`~mdgran.model.scene.load_scene` takes)."""
+    from .model.scene import load_scene
 
     return load_scene(scene, overrides)
 
 
 def _check_out(out, scene) -> str:
-    """``out`` as a path, refused up front (:func:`~mdgran.storage.check_out_file`) where the
+    """``out`` as a path, refused up front (:func:`~mdgran.output.storage.check_out_file`) where the
     run could not write it at its end."""
-    from .scene import SceneError
-    from .storage import check_out_file
+    from .model.scene import SceneError
+    from .output.storage import check_out_file
 
     if not isinstance(out, (str, os.PathLike)):
         raise SceneError("out", f"must be a path to an .h5 file or None, not "
@@ -110,7 +110,7 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
 
     * ``scene``: a built-in scene name (:func:`scenes`), a path to a TOML file, a nested
       mapping with the TOML's keys (``{"chain": {"n": 10}, "run": {"duration": 20.0}}``,
-      missing keys take their defaults) or a :class:`~mdgran.scene.Scene`.
+      missing keys take their defaults) or a :class:`~mdgran.model.scene.Scene`.
     * ``backend``: ``"reference"`` (event-driven DOP853, the accuracy oracle), ``"fast"``
       (compiled velocity Verlet at ``run.dt``) or ``"lammps"``.
     * ``out``: path of the H5MD file to write (atomically, at the end), or None.
@@ -118,7 +118,7 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
       (what ``--set`` does on the command line); also nested or as (key, value) pairs.
     * ``progress``: a progress bar on stderr for runs longer than 2 s.
     * ``keep`` (default True): keep the run in memory as ``result.trajectory`` (a
-      :class:`~mdgran.run_record.Run`).
+      :class:`~mdgran.output.run_record.Run`).
     * ``raise_errors`` (default True): a run that fails (blow-up, stalled step) raises
       :class:`~mdgran.backends.base.IntegrationError` after writing its frames; False returns
       the result with ``status = "failed: ..."``.
@@ -143,7 +143,7 @@ def run(scene, backend: str = "reference", out=None, *, set=None, progress: bool
         raise BackendUnavailable(f"backend {backend!r} is not available: {exc}") from None
     unknown = [k for k in options if k not in accepted]
     if unknown:
-        from .scene import SCHEMA
+        from .model.scene import SCHEMA
 
         names = ", ".join(repr(k) for k in unknown)
         keys = [f"{sec}.{k}" for k in unknown for sec in SCHEMA if k in SCHEMA[sec]]

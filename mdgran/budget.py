@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import model_from_scene
+from .model.chain import model_from_scene
 
 
 def paper_wire_k3(scene) -> float | None:
@@ -22,7 +22,7 @@ def paper_wire_k3(scene) -> float | None:
     sc = scene.scales
     if sc is None:
         return None
-    from .units import wire_cubic, wire_tension
+    from .model.units import wire_cubic, wire_tension
 
     d = sc.diameter
     k1_si = float(scene.substrate.k1) * sc.stiffness
@@ -32,7 +32,7 @@ def paper_wire_k3(scene) -> float | None:
 
 
 def term_budget(run) -> dict:
-    """The budget of :class:`~mdgran.run_record.Run` ``run`` (module docstring), from its
+    """The budget of :class:`~mdgran.output.run_record.Run` ``run`` (module docstring), from its
     stored frames and contact states."""
     scene = run.scene
     m = model_from_scene(scene)

@@ -7,8 +7,8 @@ whose energy-ledger error exceeds its backend's declared bound (status ``ledger-
 one line on stderr; every frame is in the file) and a sweep with any case not complete.
 Heavy imports are done inside the subcommands so that ``mdgran scenes`` starts fast.
 
-``--out`` is checked before anything runs (:func:`~mdgran.storage.check_out_file`,
-:func:`~mdgran.storage.check_out_dir`): a
+``--out`` is checked before anything runs (:func:`~mdgran.output.storage.check_out_file`,
+:func:`~mdgran.output.storage.check_out_dir`): a
 file name for ``run`` (not empty, not a folder, not ending in ``/``: a trailing slash is refused,
 not taken as a folder to put a file in; not the scene file itself; in a folder that exists or
 can be created and is writable; short enough for the temporary ``NAME.tmp-PID`` and
@@ -24,7 +24,7 @@ import math
 import os
 import sys
 
-from .storage import check_out_dir, check_out_file
+from .output.storage import check_out_dir, check_out_file
 
 
 class UsageError(Exception):
@@ -55,7 +55,7 @@ def _finite_or_none(obj):
 
 
 def _load(args):
-    from .scene import load_scene, parse_override
+    from .model.scene import load_scene, parse_override
 
     overrides = [parse_override(s) for s in (args.set or [])]
     return load_scene(args.scene, overrides)
@@ -63,7 +63,7 @@ def _load(args):
 
 # ---- subcommands -----------------------------------------------------------------------
 def cmd_scenes(args) -> int:
-    from .scene import builtin_scenes, describe
+    from .model.scene import builtin_scenes, describe
 
     names = builtin_scenes()
     width = max(len(n) for n in names)
@@ -74,7 +74,7 @@ def cmd_scenes(args) -> int:
 
 def scene_info(scene) -> dict:
     """The derived values that ``mdgran info`` prints (nondimensional, plus SI scales)."""
-    from .contact import lambda_from_fc, table_error
+    from .model.contact import lambda_from_fc, table_error
 
     law = scene.law
     info = {"scene": scene.name, **law.describe()}
@@ -93,7 +93,7 @@ def scene_info(scene) -> dict:
         info["mixture"] = scene.mixture.describe()
     sc = scene.scales
     if sc is not None:
-        from .units import wire_tension
+        from .model.units import wire_tension
 
         info.update(sc.as_dict())
         info["k1_N_per_m"] = scene.substrate.k1 * sc.stiffness
@@ -127,7 +127,7 @@ def exit_status(exc: KeyboardInterrupt) -> int:
 
 def interrupted_line(exc: KeyboardInterrupt, out: str) -> str:
     """What an interrupted ``run`` kept, and how to go on."""
-    from .checkpoint import has_checkpoint
+    from .output.checkpoint import has_checkpoint
     from .simulation import partial_path
 
     name = getattr(exc, "signum", None)
@@ -155,7 +155,7 @@ def _events_in(path, default):
 def cmd_run(args) -> int:
     from .backends.base import IntegrationError
     from .simulation import LEDGER_EXCEEDED, run
-    from .storage import StorageError
+    from .output.storage import StorageError
 
     check_out_file(args.out, args.scene)
     if not math.isfinite(args.checkpoint) or args.checkpoint < 0:
@@ -203,7 +203,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .compare import compare
+    from .crosscheck.compare import compare
 
     check_out_dir(args.out)
     scene = _load(args)
@@ -225,8 +225,8 @@ def cmd_compare(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from .scene import parse_override
-    from .sweep import run_sweep, sweep_summary
+    from .model.scene import parse_override
+    from .studies.sweep import run_sweep, sweep_summary
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
@@ -248,7 +248,7 @@ def cmd_sweep(args) -> int:
 def cmd_report(args) -> int:
     from pathlib import Path
 
-    from .study import make_report
+    from .studies.paper_study import make_report
 
     if args.workers < 1:
         raise UsageError(f"--workers: must be an integer >= 1, not {args.workers}")
@@ -256,7 +256,7 @@ def cmd_report(args) -> int:
     if args.sweep_dir is not None and not (Path(args.sweep_dir) / "sweep.json").exists():
         raise UsageError(f"--sweep-dir: {args.sweep_dir} holds no sweep.json (a folder written "
                          "by mdgran sweep)")
-    from .study import BEYOND, BEYOND_STUDIES
+    from .studies.paper_study import BEYOND, BEYOND_STUDIES
 
     known = (*BEYOND, *BEYOND_STUDIES)
     beyond = [b.strip() for b in (args.beyond or "").split(",") if b.strip()]
@@ -383,7 +383,7 @@ def flag_message(exc) -> str:
 
 def main(argv=None) -> int:
     from .backends.base import IntegrationError
-    from .scene import SceneError
+    from .model.scene import SceneError
     from .simulation import BackendUnavailable
 
     from .signals import terminate_as_interrupt

@@ -3,12 +3,12 @@ with what moved.
 
 A long chain struck at one end is mostly at rest: beyond the pulse its displacements and
 velocities are exact zeros and its contacts sit in their rest state, frame after frame.  The
-writer (:class:`mdgran.h5md_writer.H5MDWriter`) stores a per-bead or per-contact series of more
-than :data:`BLOCK` columns in HDF5 chunks of one frame by :data:`BLOCK` columns and writes only
+writer (:class:`mdgran.output.h5md_writer.H5MDWriter`) stores a per-bead or per-contact series of
+more than :data:`BLOCK` columns in HDF5 chunks of one frame by :data:`BLOCK` columns and writes only
 the blocks that hold a value other than the dataset's fill value (0, or the contacts' rest
 state).  HDF5 reads a chunk that was never written as its fill value, so every reader sees
 every value, bitwise as if it had been written; the file, the writer's time and the
-checkpoint's running checksum (:class:`mdgran.checkpoint.DataDigest`, which hashes the same
+checkpoint's running checksum (:class:`mdgran.output.checkpoint.DataDigest`, which hashes the same
 blocks) grow with the beads that moved, not with the chain.
 
 "Differs" is bitwise: ``-0.0`` differs from a fill of ``0.0`` and is written.

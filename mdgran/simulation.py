@@ -2,7 +2,7 @@
 
 Example::
 
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
     result = run(load_scene("micro-star", [("run.duration", 50.0)]), "reference")
     traj = result.trajectory          # arrays in memory
@@ -21,7 +21,7 @@ H5MD writer stores them), and hands each block to every reporter:
 its ledger), or, for a reporter without it, ``reporter.report(frame, ledger)`` frame by frame;
 ``reporter.close(status)`` at the end.  The driver decides when a checkpoint is stored (between
 blocks); the writer stores it, and reads back the one a resumed run goes on from
-(:func:`mdgran.checkpoint.resume`).
+(:func:`mdgran.output.checkpoint.resume`).
 """
 from __future__ import annotations
 
@@ -36,14 +36,14 @@ import numpy as np
 
 from .backends import BadSpec, check_options, get_backend, parse_spec
 from .backends.base import IntegrationError
-from .checkpoint import CheckpointError
-from .h5md_writer import H5MDWriter
-from .memory_reporter import MemoryReporter
-from .progress import CompileNotice, ProgressReporter
-from .run_record import ledger_scale, relative_ledger_error
-from .scene import SceneError
+from .output.checkpoint import CheckpointError
+from .output.h5md_writer import H5MDWriter
+from .output.memory_reporter import MemoryReporter
+from .output.progress import CompileNotice, ProgressReporter
+from .output.run_record import ledger_scale, relative_ledger_error
+from .model.scene import SceneError
 from .signals import FrameSections
-from .storage import OutputLocked
+from .output.storage import OutputLocked
 
 
 #: prefix of the status of a run whose ledger error exceeds its backend's declared bound
@@ -60,12 +60,12 @@ class RunResult:
     section 1: time ``1/q``, length ``p``, energy ``eta p``).
 
     Attributes:
-        trajectory: the run's record in memory (:class:`~mdgran.run_record.Run`: frames,
+        trajectory: the run's record in memory (:class:`~mdgran.output.run_record.Run`: frames,
             contact states, events, scene, status), or None for ``keep=False``.
         stats: the backend's counters (``steps``, ``events``, ``wall_time_s``, ...).
         status: ``"complete"``, ``"failed: ..."`` or ``"ledger-exceeded: ..."``.
         max_ledger_error: ``max |E(t) - E0| / E_imp`` over the frames (scale:
-            :func:`~mdgran.run_record.ledger_scale`).
+            :func:`~mdgran.output.run_record.ledger_scale`).
         error: the failure's one-line message, or None.
         ledger_bound: the backend's declared bound on ``max_ledger_error`` (same scale).
     """
@@ -134,8 +134,8 @@ def available_memory() -> float | None:
 def resource_estimate(scene, keep: bool = True) -> dict:
     """Lower bounds, in bytes, of the memory and the output-file size of a run of ``scene``:
     ``8 n`` bytes per stored array of ``n`` beads; the backend's state (10 such arrays), the
-    H5MD writer's buffer (:func:`~mdgran.h5md_layout.buffer_frames` frames of x and v and their
-    copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
+    H5MD writer's buffer (:func:`~mdgran.output.h5md_layout.buffer_frames` frames of x and v and
+    their copies at a flush, plus 3 arrays of positions, plus 1 byte per contact for its state, 17
     with ``output.contacts``; of the stored beads, ``output.bead_stride``),
     the frames kept
     in memory (``keep``: x and v, and the copies made for the trajectory, plus the frame's
@@ -143,7 +143,7 @@ def resource_estimate(scene, keep: bool = True) -> dict:
     six observables and the step and time they share (positions: a time of their own), the
     series of more than :data:`~mdgran.rest_blocks.BLOCK` beads counted at one block a frame
     (the writer leaves out the blocks at rest)."""
-    from .h5md_layout import buffer_frames, stored_bead_count
+    from .output.h5md_layout import buffer_frames, stored_bead_count
     from .rest_blocks import BLOCK
 
     n = int(scene.chain.n)
@@ -232,7 +232,7 @@ def worst(so_far: float, errors: np.ndarray) -> float:
 def report(reporter, block) -> None:
     """Hand the frames of ``block`` (:class:`~mdgran.backends.base.Frames`) to ``reporter``:
     whole if it has ``report_block(block)``, else frame by frame, ``report(frame, ledger)``
-    (each frame's ledger a dict, as :meth:`~mdgran.chain.ChainModel.ledger` gives it)."""
+    (each frame's ledger a dict, as :meth:`~mdgran.model.chain.ChainModel.ledger` gives it)."""
     whole = getattr(reporter, "report_block", None)
     if whole is not None:
         whole(block)
@@ -244,7 +244,7 @@ def report(reporter, block) -> None:
 class CheckpointClock:
     """When a run stores a checkpoint: at the first block that ends ``every`` seconds of wall
     time or more after the last one (None: never).  The driver decides and hands the writer
-    the backend's state (:meth:`~mdgran.h5md_writer.H5MDWriter.checkpoint`)."""
+    the backend's state (:meth:`~mdgran.output.h5md_writer.H5MDWriter.checkpoint`)."""
 
     def __init__(self, every: float | None):
         self.every = every
@@ -271,7 +271,7 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     then ``OUT.partial`` stays, and ``resume=True`` continues from its last checkpoint (the
     in-memory trajectory then holds only the resumed frames; the file holds all).  A run whose
     frames cannot fit in memory or on disk is refused first (:func:`check_resources`).  The run
-    works on its own copy of ``scene``, checked again (:meth:`~mdgran.scene.Scene.own_copy`).
+    works on its own copy of ``scene``, checked again (:meth:`~mdgran.model.scene.Scene.own_copy`).
 
     ``collective`` (default True): under ``mpiexec`` every rank runs this same call (LAMMPS
     splits the chain over them), so rank 0 alone writes ``out`` and shows progress.  False: this

@@ -134,7 +134,7 @@ def datasets(path: Path) -> dict:
     """Every dataset of an HDF5 file, by its path, as a numpy array."""
     import h5py
 
-    from mdgran.run_record import dataset_paths
+    from mdgran.output.run_record import dataset_paths
 
     with h5py.File(path, "r") as f:
         return {key: f[key][()] for key in dataset_paths(f)}

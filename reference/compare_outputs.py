@@ -20,8 +20,8 @@ What "identical" means per file type:
 JSON strings holding the folder's own path (``report.json``'s ``sweep.dir``) are compared with
 it replaced.  Besides the identity check: where an H5 file of AFTER stores the contact states
 (``/observables/contacts/closed``), they are checked against its events replayed
-(:func:`mdgran.chain.replay_states`) and a frame where they differ is listed (``STATES``); this
-does not change the exit status.
+(:func:`mdgran.model.chain.replay_states`) and a frame where they differ is listed (``STATES``);
+this does not change the exit status.
 
 Exit status 0 when every file of BEFORE has an identical counterpart in AFTER, 1 otherwise.  The
 script prints one line per file that differs and a summary count per type.
@@ -65,7 +65,7 @@ def h5_datasets(path) -> dict:
     """Dataset name -> array, and ``@parameters`` -> the /parameters attributes."""
     import h5py
 
-    from mdgran.run_record import dataset_paths
+    from mdgran.output.run_record import dataset_paths
 
     out = {}
     with h5py.File(path, "r") as f:
@@ -121,7 +121,7 @@ def markdown_without_timings(text: str) -> list:
 
 def states_replay(path) -> list:
     """Differences between the contact states stored in ``path`` and its events replayed."""
-    from mdgran.run_record import read_h5
+    from mdgran.output.run_record import read_h5
 
     run = read_h5(path)
     if run._closed is None:

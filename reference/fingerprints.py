@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 OUT = Path(__file__).with_name("fingerprints.json")

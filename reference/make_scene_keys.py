@@ -1,4 +1,4 @@
-"""Write docs/scene_keys.md, the scene-key reference, from mdgran.scene.SCHEMA.
+"""Write docs/scene_keys.md, the scene-key reference, from mdgran.model.scene.SCHEMA.
 
     python reference/make_scene_keys.py           # write it
     python reference/make_scene_keys.py --check   # exit 1 if the file is stale
@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from mdgran.scene import key_reference
+from mdgran.model.scene import key_reference
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "scene_keys.md"
 

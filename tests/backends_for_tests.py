@@ -2,7 +2,7 @@
 from dataclasses import replace
 
 from mdgran.backends.reference import ReferenceBackend
-from mdgran.contact import ContactLaw
+from mdgran.model.contact import ContactLaw
 
 
 class TightReference(ReferenceBackend):

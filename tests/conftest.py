@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import Phase, settings
 
-from mdgran.scene import Scene, resolve
+from mdgran.model.scene import Scene, resolve
 
 # Hypothesis draws the same cases on every run ("ci", the default: the test command is
 # reproducible, a red CI is a real failure and comes back on the next run); MDGRAN_HYPOTHESIS=
@@ -26,7 +26,7 @@ def h5_datasets(path) -> dict:
     """Every dataset of an HDF5 file: path -> its values."""
     import h5py
 
-    from mdgran.run_record import dataset_paths
+    from mdgran.output.run_record import dataset_paths
 
     with h5py.File(path) as f:
         return {name: f[name][()] for name in dataset_paths(f)}

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 
 from mdgran.backends.lammps import LammpsBackend
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 
 #: frames after which the boundary between 2 ranks moves to this fraction of the box
 BALANCE = {25: 0.3, 50: 0.7}

@@ -4,7 +4,7 @@ import pytest
 
 from mdgran import analysis as an
 from mdgran.analysis import clusters as cl
-from mdgran.contact import ContactLaw, fc_from_lambda
+from mdgran.model.contact import ContactLaw, fc_from_lambda
 
 
 # ---- effective damping -------------------------------------------------------------------------
@@ -222,7 +222,7 @@ def test_pulse_speed_and_width_of_a_gaussian_pulse():
 # ---- a short real run --------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def micro_run():
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     scene = load_scene("micro-star", [("run.duration", 60.0)])
@@ -252,7 +252,7 @@ def test_real_micro_run(micro_run):
 
     # modes of a cluster about its mean state over the last 5 time units: where its contacts
     # stayed compressed (positive stiffness), frequencies are real and above sqrt(k1)
-    from mdgran.chain import model_from_scene
+    from mdgran.model.chain import model_from_scene
 
     law = model_from_scene(scene).law
     checked = 0

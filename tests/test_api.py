@@ -15,9 +15,9 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 import mdgran
-from mdgran.scene import SCENE_DIR, SceneError
+from mdgran.model.scene import SCENE_DIR, SceneError
 from mdgran.simulation import RunResult
-from mdgran.run_record import LEDGER_NAMES, Run
+from mdgran.output.run_record import LEDGER_NAMES, Run
 
 SHORT = {"run.duration": 3.0}  # micro-star to t = 3: the primary pulse, ~0.5 s on reference
 
@@ -50,7 +50,7 @@ def test_public_names():
                  "Run", "Trajectory", "IntegrationError", "BackendUnavailable"):
         assert name in mdgran.__all__ and name in dir(mdgran)
         assert getattr(mdgran, name) is not None
-    assert mdgran.Scene is mdgran.scene.Scene
+    assert mdgran.Scene is mdgran.model.scene.Scene
     assert mdgran.Trajectory is mdgran.Run  # the former name, an alias
     assert "micro-star" in mdgran.scenes() and "hard/tiny" in mdgran.scenes()
     with pytest.raises(AttributeError, match="no_such_name"):
@@ -229,7 +229,7 @@ def test_the_python_api_runs_without_the_command_line_module():
 def test_a_run_keeps_its_own_scene():
     """A Scene changed after a run does not change the run's record, and a change that
     breaks it is refused in one line (it ran into NumPy errors)."""
-    from mdgran.scene import SceneError, load_scene
+    from mdgran.model.scene import SceneError, load_scene
 
     sc = load_scene("micro-star", [("run.duration", 2.0)])
     r1 = mdgran.run(sc, "reference")

@@ -3,7 +3,7 @@ of a fixed-step run follows the order of the backend as constructed."""
 import pytest
 
 from mdgran.backends import get_backend
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import make_backend, run
 
 SCENE = load_scene("collision-pair", [("run.duration", 0.1)])

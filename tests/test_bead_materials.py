@@ -2,7 +2,7 @@
 beads.mass set the per-bead ratios.  The expected values are computed here from SI by hand:
 the Hertz effective modulus 1/E* = (1 - nu_1^2)/E_1 + (1 - nu_2^2)/E_2, R = d/4,
 w_12 = sqrt(w_1 w_2), masses rho pi d^3 / 6, and the Maugis parameter of the pair, not from
-mdgran.mixture."""
+mdgran.model.mixture."""
 import json
 import math
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 from mdgran.cli import main
-from mdgran.contact import fc_from_lambda
-from mdgran.scene import SceneError, load_scene, tomllib
+from mdgran.model.contact import fc_from_lambda
+from mdgran.model.scene import SceneError, load_scene, tomllib
 
 D = 2.5e-6  # m, micro-star's beads
 ALUMINA = {"diameter": D, "E": 338e9, "nu": 0.21, "w": 0.146, "density": 3900.0}

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 from conftest import assert_same_runs
 
-from mdgran.chain import model_from_scene
-from mdgran.scene import load_scene
+from mdgran.model.chain import model_from_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run, worst
 
 

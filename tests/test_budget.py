@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from mdgran.budget import paper_wire_k3, term_budget
-from mdgran.chain import model_from_scene
-from mdgran.scene import load_scene
+from mdgran.model.chain import model_from_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import make_backend, run
 
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from mdgran.cli import main
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
-from mdgran.run_record import read_h5
+from mdgran.output.run_record import read_h5
 
 BAD = [
     (["info", "no-such-scene"], "SCENE"),
@@ -195,7 +195,7 @@ def test_checkpoint_interval_must_be_a_number_of_seconds(value, tmp_path, capsys
     assert main(["run", "micro-star", "--out", str(out), f"--checkpoint={value}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--checkpoint" in err[0] and not out.exists()
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     with pytest.raises(SceneError, match="checkpoint_every"):
         run(load_scene("micro-star"), "reference", out=out, checkpoint_every=float(value))

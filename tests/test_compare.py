@@ -5,8 +5,8 @@ import json
 import pytest
 
 from mdgran.backends import BACKENDS
-from mdgran.compare import compare
-from mdgran.scene import load_scene
+from mdgran.crosscheck.compare import compare
+from mdgran.model.scene import load_scene
 
 TEST_BACKENDS = {
     "tight-reference": "backends_for_tests:TightReference",
@@ -68,7 +68,7 @@ def test_cli_compare_exit_status(test_backends, tmp_path, capsys):
 
 
 def test_event_comparison_is_per_contact():
-    from mdgran.compare import compare_events
+    from mdgran.crosscheck.compare import compare_events
 
     ta = [1.0, 1.001, 2.0, 5.0]
     sa = [(3, 1), (5, 1), (3, 0), (5, 0)]
@@ -99,7 +99,7 @@ def test_wrong_snap_off_fails_cluster_statistics(test_backends):
 def test_an_unmatched_event_is_excused_only_when_undecidable():
     """A surplus close of contact 3 at t = 2 is a disagreement, unless the grazing test says
     the other backend came within its error of that switch (then it is counted apart)."""
-    from mdgran.compare import compare_events
+    from mdgran.crosscheck.compare import compare_events
 
     ta, sa = [1.0, 2.0], [(3, 0), (3, 1)]
     tb, sb = [1.0], [(3, 0)]

@@ -4,7 +4,7 @@ identities."""
 import numpy as np
 import pytest
 
-from mdgran.contact import ContactLaw, fc_from_lambda, lambda_from_fc, table_error
+from mdgran.model.contact import ContactLaw, fc_from_lambda, lambda_from_fc, table_error
 
 # docs/physics.md section 2, check values: lambda, fc, delta_min, f_on, f_off, W, delta_eq,
 # dF/ddelta at eq
@@ -100,7 +100,7 @@ def test_table_error_shrinks_with_size():
 def test_spline_table_is_fourth_order_through_snap_off():
     """The table is a cubic spline in w = sqrt(delta - delta_min): error ~ dw^4, so doubling
     the nodes divides it by ~16 (measured 12.3 and 13.9 from 101 to 201 to 401 nodes)."""
-    from mdgran.contact import ContactTable
+    from mdgran.model.contact import ContactTable
 
     law = ContactLaw("schwarz", fc_from_lambda(0.64))
     e1, e2 = ContactTable(law, 201).error(), ContactTable(law, 401).error()
@@ -118,6 +118,6 @@ def test_spline_table_is_fourth_order_through_snap_off():
 def test_spline_table_exact_where_force_is_cubic_in_w(law):
     """f(w) is a cubic polynomial for Hertz (w^3) and for Schwarz at fc = -2: the spline
     reproduces it to round-off even on a coarse table."""
-    from mdgran.contact import ContactTable
+    from mdgran.model.contact import ContactTable
 
     assert ContactTable(law, 101).error()["force_abs"] < 1e-10

@@ -12,11 +12,11 @@ import pytest
 
 from conftest import InterruptAt
 
-from mdgran.chain import model_from_scene
-from mdgran.reporters import H5MDWriter
-from mdgran.scene import load_scene
+from mdgran.model.chain import model_from_scene
+from mdgran.output.reporters import H5MDWriter
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
-from mdgran.run_record import dataset_paths, read_h5
+from mdgran.output.run_record import dataset_paths, read_h5
 
 T_END, T_STOP = 40.0, 30.0  # micro-star: 14 events by t = 40 (snap-offs and a re-closure)
 SERIES = ("compression", "force", "closed")
@@ -131,7 +131,7 @@ def test_resume_with_contacts_is_bitwise(runs):
 
 def test_a_damaged_contact_series_is_refused(runs, tmp_path):
     """The checksums cover the new series: one changed state makes the resume refuse."""
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     p = tmp_path / "r.h5.partial"
     shutil.copy(runs["dir"] / "cli" / "r.h5.partial", p)
@@ -250,7 +250,7 @@ def test_series_share_one_clock(runs):
 def test_resume_of_a_file_with_a_clock_per_series(runs, tmp_path, monkeypatch):
     """A checkpoint written with a step and time per series (mdgran before the shared clock)
     resumes into the same datasets as an uninterrupted run."""
-    import mdgran.h5md_layout as layout
+    import mdgran.output.h5md_layout as layout
 
     sc = runs["scene"]
     own = layout.make_series

@@ -1,5 +1,5 @@
-"""The compiled scalar law (mdgran.contact_scalar): the fast kernel's forms (powers of t as
-products) against the numpy law of mdgran.contact (the C library's ``pow``, lifted as ufuncs),
+"""The compiled scalar law (mdgran.model.contact_scalar): the fast kernel's forms (powers of t as
+products) against the numpy law of mdgran.model.contact (the C library's ``pow``, lifted as ufuncs),
 against the integral identities the kernel relies on, and the C++ fix's constants table."""
 from pathlib import Path
 
@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran.contact import ContactLaw
-from mdgran import contact_scalar
-from mdgran.contact_scalar import (branch_t, hertz_energy, hertz_force, law_energy, law_force,
+from mdgran.model.contact import ContactLaw
+from mdgran.model import contact_scalar
+from mdgran.model.contact_scalar import (branch_t, hertz_energy, hertz_force, law_energy, law_force,
                                    schwarz_constants, schwarz_energy, schwarz_force,
                                    schwarz_mean_force)
 
@@ -72,8 +72,9 @@ def test_hertz_scalar_law():
 
 def test_cxx_constants_header_is_generated_from_the_python_constants():
     """law_constants.h, which the C++ fix includes, is cxx_header()'s text (regenerate it
-    with ``python -m mdgran.contact_scalar``), and it holds the values the Python side uses."""
-    header = (Path(contact_scalar.__file__).parent / "backends" / "lammps" / "fix"
+    with ``python -m mdgran.model.contact_scalar``), and it holds the values the Python side
+    uses."""
+    header = (Path(contact_scalar.__file__).parents[1] / "backends" / "lammps" / "fix"
               / contact_scalar.CXX_HEADER)
     text = header.read_text()
     assert text == contact_scalar.cxx_header()

@@ -1,5 +1,5 @@
-"""The controls of the macro/micro comparison (mdgran.controls): the scenes mean what they say,
-and the window arithmetic gives known answers on synthetic curves."""
+"""The controls of the macro/micro comparison (mdgran.studies.controls): the scenes mean what they
+say, and the window arithmetic gives known answers on synthetic curves."""
 import math
 
 import numpy as np
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mdgran import controls
-from mdgran.units import scales_from_material
+from mdgran.studies import controls
+from mdgran.model.units import scales_from_material
 
 
 def test_control_scenes_match_as_documented():
@@ -47,7 +47,7 @@ def test_ratio_windows_finds_the_interval_where_micro_is_below(lo, width, depth)
 
 
 def test_decay_time_of_an_exponential():
-    from mdgran.run_record import Run
+    from mdgran.output.run_record import Run
 
     t = np.linspace(0.0, 300.0, 3001)
     n = 8

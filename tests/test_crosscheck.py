@@ -2,8 +2,8 @@
 reference against LAMMPS, must pass every criterion of the harness."""
 import pytest
 
-from mdgran.compare import compare
-from mdgran.scene import load_scene
+from mdgran.crosscheck.compare import compare
+from mdgran.model.scene import load_scene
 
 
 @pytest.mark.lammps

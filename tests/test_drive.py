@@ -1,4 +1,4 @@
-"""Imposed excitations (mdgran.drive): a half-sine force pulse and a base motion
+"""Imposed excitations (mdgran.model.drive): a half-sine force pulse and a base motion
 under the substrate, on the reference, fast and LAMMPS backends (the Python hook and the native
 contact), against analytic motions, the momentum a pulse gives, and the energy ledger with the
 excitations' work.
@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mdgran import run
-from mdgran.drive import base_from_acceleration, base_from_displacement
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.drive import base_from_acceleration, base_from_displacement
+from mdgran.model.scene import SceneError, load_scene
 
 from conftest import h5_datasets, make_scene
 
@@ -324,7 +324,7 @@ def test_compare_passes_every_backend_on_the_driven_scenes(name, tmp_path):
     built-in driven scenes to t = 60: every backend within its error estimate of the
     reference to the horizon, events matched, ledgers (with the excitations' work) within
     bounds (measured: 30 of 30 criteria pass; pulse: 28 events compared on fast and native)."""
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     backends = ("reference", "fast", "lammps", "lammps:native")
     rep = compare(load_scene(name, [("run.duration", 60.0)]), backends, out_dir=tmp_path)
@@ -336,7 +336,7 @@ def test_compare_passes_every_backend_on_the_driven_scenes(name, tmp_path):
 def test_compare_perturbs_the_excitation_of_a_driven_scene():
     """compare's ensemble and predictability runs scale the excitation: for a scene driven by
     a pulse or a base alone, scaling the (zero) impulse would make identical members."""
-    from mdgran.compare import scaled_excitation
+    from mdgran.crosscheck.compare import scaled_excitation
 
     sc = shaken_chain(1.0, 2.0, 0.3, 3)
     up = scaled_excitation(sc, 1.001)

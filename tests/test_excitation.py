@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mdgran import run
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 
 from conftest import make_scene
 

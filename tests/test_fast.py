@@ -7,7 +7,7 @@ from hypothesis import given, settings, strategies as st
 
 from mdgran.backends import fast_kernel as fk
 from mdgran.backends.base import IntegrationError
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import run
 
 from conftest import assert_same_runs, make_scene
@@ -176,7 +176,7 @@ def test_ledger_closure_scales_like_dt_squared():
 
 def test_collision_pair_conservation_laws():
     sc = load_scene("collision-pair", [("run.dt", 0.001)])
-    from mdgran.chain import model_from_scene
+    from mdgran.model.chain import model_from_scene
 
     w = model_from_scene(sc).law.loop_energy
     tr = run(sc, "fast").trajectory

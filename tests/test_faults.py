@@ -202,7 +202,7 @@ def test_writes_past_a_size_limit_end_in_one_line(tmp_path):
 # ---- two runs, one output; resume on another backend; damaged checkpoints -----------------
 def test_second_run_on_the_same_output_is_refused(tmp_path, monkeypatch):
     """Without HDF5's locking the second run exited 0 with the first run's data."""
-    from mdgran.storage import OutputLock
+    from mdgran.output.storage import OutputLock
 
     out = tmp_path / "c.h5"
     lock = OutputLock(out)  # another run (this process) is writing c.h5
@@ -222,11 +222,11 @@ def test_second_run_on_the_same_output_is_refused(tmp_path, monkeypatch):
 def test_a_killed_holders_forked_children_do_not_keep_its_lock(tmp_path):
     """A sweep's workers are forked while it holds ``sweep.lock``; when the sweep is killed,
     a worker still exiting kept the lock and the resume was refused as 'another sweep'."""
-    from mdgran.storage import OutputLock
+    from mdgran.output.storage import OutputLock
 
     out = tmp_path / "c.h5"
     code = ("import os, sys, time\n"
-            "from mdgran.storage import OutputLock\n"
+            "from mdgran.output.storage import OutputLock\n"
             f"lock = OutputLock({str(out)!r})\n"
             "child = os.fork()\n"
             "if child == 0:\n"
@@ -245,7 +245,7 @@ def test_a_killed_holders_forked_children_do_not_keep_its_lock(tmp_path):
 def partial(tmp_path_factory, request):
     """A reference run of micro-star to t = 20, interrupted at t = 12 with a checkpoint, and
     the uninterrupted run's file."""
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     d = tmp_path_factory.mktemp("cp")
@@ -292,7 +292,7 @@ def test_damaged_checkpoint_is_refused_and_kept(tmp_path, partial, damage):
     gave thousands of zero frames."""
     import json
 
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     sc, src, _ = partial
     p = tmp_path / "r.h5.partial"
@@ -325,7 +325,7 @@ def test_a_flipped_byte_is_refused_or_harmless(tmp_path_factory, partial, where,
     """Any one byte changed anywhere in a checkpoint file: the resume is refused with one
     line, or (the byte was in space the file does not use) it gives the uninterrupted run's
     frames bitwise.  Never a resumed run with other numbers."""
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     sc, src, whole = partial
     d = tmp_path_factory.mktemp("flip")

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mdgran.cli import main, scene_info
-from mdgran.contact import (FC_RULES, ContactLaw, fc_from_lambda, lambda_from_fc,
+from mdgran.model.contact import (FC_RULES, ContactLaw, fc_from_lambda, lambda_from_fc,
                             maugis_dugdale_pulloff)
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.scene import SceneError, load_scene
 
 MD = "maugis-dugdale"
 # docs/physics.md section 2: Maugis's equations solved exactly vs the COS relation

@@ -78,7 +78,7 @@ def test_smoothed_rate_where_the_cubic_spline_undershot():
 # ---- short runs shared by the figure tests -------------------------------------------------------
 @pytest.fixture(scope="module")
 def micro():
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     sc = load_scene("micro-star", [("run.duration", 40.0), ("run.tolerance", 1e-6)])
@@ -87,7 +87,7 @@ def micro():
 
 @pytest.fixture(scope="module")
 def hertz():
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
 
     sc = load_scene("macro-hertz", [("run.duration", 20.0), ("run.tolerance", 1e-6)])
@@ -128,7 +128,7 @@ def _tick_sizes(ax):
 
 # ---- paper figures -----------------------------------------------------------------------------
 def test_fig5_draws_no_negative_rate(micro, saved, tmp_path):
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     tr, sc = micro
     pf.fig5(tr, tmp_path / "fig5.png")
@@ -141,7 +141,7 @@ def test_fig5_draws_no_negative_rate(micro, saved, tmp_path):
 
 
 def test_fig_b_colour_bars_shared_x_ticks_and_rates(micro, saved, tmp_path):
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     tr, sc = micro
     # the structure does not depend on the runs: one run labelled as 2 x 2 cases
@@ -174,14 +174,14 @@ def _fake_comparison(traj, scene, names=("reference", "fast")):
     """What compare_report._figures gets, built from one short run (second backend: the same
     run; their lines coincide exactly, the case that hid one of them)."""
     from mdgran.analysis.statistics import cluster_lives
-    from mdgran.compare import BackendRuns
+    from mdgran.crosscheck.compare import BackendRuns
 
     err = np.full(len(traj.time), 1e-9)
     runs = [BackendRuns(n, traj, traj, err, 1.0, 0.1, 1e-9, 1e-9, [traj]) for n in names]
     lives = cluster_lives(traj.measures.history)
     horizon = 0.5 * float(traj.time[-1])
     pred = {"time": traj.time, "difference": np.geomspace(1e-14, 1e-2, len(traj.time))}
-    from mdgran.compare import PREDICTABLE, SAFETY
+    from mdgran.crosscheck.compare import PREDICTABLE, SAFETY
 
     report = {"pairs": {n: {"horizon": horizon, "clusters": {"lifetimes": {"pvalue": 0.5}}}
                         for n in names[1:]},
@@ -194,7 +194,7 @@ def _fake_comparison(traj, scene, names=("reference", "fast")):
 @pytest.fixture(scope="module")
 def comparison(request, tmp_path_factory):
     """The comparison figures of each short run, drawn once: ``{"micro"|"hertz": Saved}``."""
-    from mdgran.compare_report import _figures
+    from mdgran.crosscheck.compare_report import _figures
 
     drawn = {}
     for which in ("micro", "hertz"):
@@ -246,7 +246,7 @@ def test_controls_figure_leaves_out_a_control_whose_run_failed(tmp_path, monkeyp
     """A sweep of the controls in which macro-si's run failed (its LAMMPS run stopped): the
     figure draws micro-star and the two macro variants that ran, one line each in (b), instead
     of stopping the report on the missing one."""
-    from mdgran import paper_figures as pf
+    from mdgran.studies import paper_figures as pf
 
     s = np.linspace(0.0, 10.0, 21)
     curves = {"s": s, "micro": np.exp(-0.3 * s), "macro": np.exp(-0.2 * s)}

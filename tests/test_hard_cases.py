@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 FULL = os.environ.get("MDGRAN_FULL") == "1"
@@ -126,7 +126,7 @@ def test_hard_case_on_fixed_step_backend(backend, name, duration):
     why = _available(backend)
     if why:
         pytest.skip(why)
-    from mdgran.compare import compare_events
+    from mdgran.crosscheck.compare import compare_events
 
     sc = load_scene(name, [("run.duration", duration)])
     res = run(sc, backend)

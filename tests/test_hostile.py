@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from mdgran.cli import main
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.scene import SceneError, load_scene
 
 MDGRAN = [sys.executable, "-m", "mdgran"]
 
@@ -139,7 +139,7 @@ def test_watchdog_stops_a_collapsed_step(tmp_path, capsys, monkeypatch):
     """Past the limits (lifted here), the reference's step collapses to 1e-150: the watchdog
     stops the run within seconds, exit 1, one line naming the time, the step and the bead, and
     the file holds the frames so far with the failure as its status."""
-    import mdgran.scene as scene_mod
+    import mdgran.model.scene as scene_mod
 
     monkeypatch.setattr(scene_mod, "LIMITS", {})
     out = tmp_path / "x.h5"

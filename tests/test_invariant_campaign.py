@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 CAMPAIGN = BENCHMARKS / "invariant_campaign.py"
@@ -106,7 +106,7 @@ def test_two_bead_event_counts_match(campaign_records):
 def test_checks_flag_a_broken_state():
     """A frame with an open contact overlapping and a closed one below delta_off is flagged."""
     from mdgran.backends.base import Frame
-    from mdgran.chain import model_from_scene
+    from mdgran.model.chain import model_from_scene
 
     sc = load_scene("collision-pair", [("chain.n", 3)])
     model = model_from_scene(sc)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 
@@ -86,7 +86,7 @@ def test_two_mpi_ranks_agree_with_serial(tmp_path):
     import subprocess
     import sys
 
-    from mdgran.trajectory import read_h5
+    from mdgran.output.run_record import read_h5
 
     mpiexec = shutil.which("mpiexec") or str(__import__("pathlib").Path(sys.executable).with_name(
         "mpiexec"))

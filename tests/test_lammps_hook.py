@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from mdgran.backends.lammps import hook as kernel
-from mdgran.contact import ContactLaw, ContactTable, fc_from_lambda
-from mdgran.scene import load_scene
+from mdgran.model.contact import ContactLaw, ContactTable, fc_from_lambda
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 pytestmark = pytest.mark.lammps

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import make_backend, run
 
 pytestmark = pytest.mark.lammps
@@ -227,7 +227,7 @@ THERMAL_WORKER = """
 import sys
 import numpy as np
 from mpi4py import MPI
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 sc = load_scene("micro-star", [("chain.n", 21), ("run.duration", 8.0), ("run.output_interval", 1.0),
                                ("thermal.temperature", 2.0), ("thermal.seed", 1),
@@ -360,7 +360,7 @@ HULL_WORKER = """
 import sys
 import numpy as np
 from mpi4py import MPI
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import make_backend
 sc = load_scene("micro-star", [("chain.n", 400), ("impulse.bead", 200), ("run.duration", 4.0)])
 b = make_backend(sc, "lammps:native")

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from mdgran import run
-from mdgran.chain import model_from_scene
-from mdgran.scene import load_scene
+from mdgran.model.chain import model_from_scene
+from mdgran.model.scene import load_scene
 
 from conftest import make_scene
 from test_mixture import unlike_pair_after, unlike_pair_scene
@@ -177,7 +177,7 @@ def test_compare_passes_reference_fast_and_lammps_on_mixed_scenes(name, backends
     """``mdgran compare`` of reference, fast and LAMMPS on the dimer and intruder scenes to
     t = 60: each backend within its error estimate of the reference to the horizon, events
     matched, ledgers within bounds, cluster statistics past the horizon."""
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     rep = compare(load_scene(name, [("run.duration", 60.0)]), backends, out_dir=tmp_path)
     failed = [c for c in rep["criteria"] if not c["passed"]]
@@ -210,7 +210,7 @@ def test_one_law_per_pair_needs_the_exact_law(spec):
     """Random diameters with contact.lambda: every pair its own law, more than 255 tables is
     refused (the key, what to do); with the exact law the hook and the native contact run it,
     close to the reference (t = 2, dt 0.0025)."""
-    from mdgran.scene import SceneError
+    from mdgran.model.scene import SceneError
 
     sc = load_scene("micro-star", [("chain.n", 300), ("chain.boundary", "free"),
                                    ("beads.pattern", "random"), ("beads.spread", 0.2),

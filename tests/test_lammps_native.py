@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -13,8 +13,8 @@ import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
 from mdgran.backends.lammps import plugin as native_plugin
-from mdgran.contact import FC_DMT, FC_JKR, ContactLaw, fc_from_lambda
-from mdgran.scene import load_scene
+from mdgran.model.contact import FC_DMT, FC_JKR, ContactLaw, fc_from_lambda
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 pytestmark = pytest.mark.lammps
@@ -140,7 +140,8 @@ def test_tether_and_integrate_are_the_lammps_fixes_bitwise(plugin, tmp_path):
 
 def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
     """mpiexec -n 2 with the backend's input (one slab of the chain per rank): as serial."""
-    code = ("import sys; from mdgran.scene import load_scene; from mdgran.simulation import run; "
+    code = ("import sys; from mdgran.model.scene import load_scene; "
+            "from mdgran.simulation import run; "
             "run(load_scene('micro-star', [('run.duration', 2.0)]), 'lammps', "
             "contact='native', out=sys.argv[1], checkpoint_every=None)")
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
@@ -148,7 +149,7 @@ def test_native_on_two_ranks_through_the_backend(plugin, tmp_path):
     subprocess.run([sys.executable, "-c", code, str(one)], check=True, timeout=300)
     subprocess.run([mpiexec, "-n", "2", sys.executable, "-c", code, str(two)], check=True,
                    timeout=300)
-    from mdgran.trajectory import read_h5
+    from mdgran.output.run_record import read_h5
 
     a, b = read_h5(one), read_h5(two)
     assert np.abs(a.x - b.x).max() < 1e-10

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mdgran.backends.fast import FastBackend
-from mdgran.chain import model_from_scene, row_dots
-from mdgran.scene import load_scene
+from mdgran.model.chain import model_from_scene, row_dots
+from mdgran.model.scene import load_scene
 
 SCENES = [
     ("micro-star", []),  # Schwarz, displacement snap-off, walls, k1, damping
@@ -84,7 +84,7 @@ def test_a_mixture_longer_than_a_ledger_block(name, overrides):
     their own pair laws (the whole chain's scales were broadcast against one block and the
     ledger raised).  The block ledger is each state's, and its contact energy is the sum of
     the pair laws' energies taken contact by contact."""
-    from mdgran.chain import LEDGER_BLOCK
+    from mdgran.model.chain import LEDGER_BLOCK
 
     model = model_from_scene(load_scene(name, [("chain.n", LEDGER_BLOCK + 900), *overrides]))
     assert model.n_contacts > LEDGER_BLOCK

@@ -1,13 +1,13 @@
-"""The primary pulse in long chains (mdgran.long_chain): the tracker against the frames it saw,
-the beads' energies against the ledger, and the measures against chain length."""
+"""The primary pulse in long chains (mdgran.studies.long_chain): the tracker against the frames it
+saw, the beads' energies against the ledger, and the measures against chain length."""
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import make_scene
 
-from mdgran.chain import model_from_scene
-from mdgran.long_chain import PulseTracker, bead_energies, pulse_profile, run_pulse
+from mdgran.model.chain import model_from_scene
+from mdgran.studies.long_chain import PulseTracker, bead_energies, pulse_profile, run_pulse
 from mdgran.simulation import run
 
 
@@ -78,8 +78,8 @@ def test_the_native_fix_carries_the_same_pulse(plugin):
     against the fast backend's on 3,000: per-bead largest speeds within 1e-8 v0 (round-off:
     the fix works in absolute positions; measured 2.3e-12), the same reach and snap-offs.  A
     disagreeing check is a run that is not complete in the report."""
-    from mdgran.long_chain import compare_backends
-    from mdgran.study import long_chain_markdown
+    from mdgran.studies.long_chain import compare_backends
+    from mdgran.studies.paper_study import long_chain_markdown
 
     fast = run_pulse(3000, 12.0, None, 20.0)
     check = compare_backends(fast, 30_000, 20.0, "lammps:native", ranks=2)

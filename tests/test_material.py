@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from mdgran.cli import main, scene_info
-from mdgran.contact import fc_from_lambda
-from mdgran.scene import Scene, SceneError, key_reference, load_scene, tomllib
-from mdgran.units import INFO_KEYS, scales_from_material
+from mdgran.model.contact import fc_from_lambda
+from mdgran.model.scene import Scene, SceneError, key_reference, load_scene, tomllib
+from mdgran.model.units import INFO_KEYS, scales_from_material
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "scenes.md"

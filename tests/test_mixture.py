@@ -1,8 +1,8 @@
-"""Chains of unlike beads ([beads], [striker]; mdgran.mixture): each pair's law, the start from
-equilibrium, and runs of the reference backend against analytic results: the restitution of an
+"""Chains of unlike beads ([beads], [striker]; mdgran.model.mixture): each pair's law, the start
+from equilibrium, and runs of the reference backend against analytic results: the restitution of an
 unlike pair, a striker's elastic collision, the modes of a dimer chain, a light intruder's
 localized mode.  The expected values are computed here from the paper's formulas and the
-homogeneous law (contact.ContactLaw), not from mdgran.mixture."""
+homogeneous law (contact.ContactLaw), not from mdgran.model.mixture."""
 import math
 import subprocess
 import sys
@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from mdgran import run
-from mdgran.chain import model_from_scene
-from mdgran.contact import ContactLaw, fc_from_lambda
-from mdgran.scene import SceneError, load_scene
+from mdgran.model.chain import model_from_scene
+from mdgran.model.contact import ContactLaw, fc_from_lambda
+from mdgran.model.scene import SceneError, load_scene
 
 from conftest import make_scene
 
@@ -363,7 +363,7 @@ def test_compare_passes_reference_against_fast_on_mixed_scenes(name, tmp_path):
     """``mdgran compare`` of reference and fast on the dimer and intruder scenes to t = 60:
     trajectories within the error estimates to the horizon, events matched (or undecidable
     at the backends' accuracy), ledgers within bounds, cluster statistics past the horizon."""
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     rep = compare(load_scene(name, [("run.duration", 60.0)]), ("reference", "fast"),
                   out_dir=tmp_path)

@@ -10,7 +10,7 @@ import time
 import h5py
 import numpy as np
 
-from mdgran.run_record import dataset_paths
+from mdgran.output.run_record import dataset_paths
 
 
 def test_sigkill_leaves_no_file(tmp_path):

@@ -106,7 +106,8 @@ def test_vectorized_coincidence_equals_loop():
 
 
 def test_pooled_coincidence_draws_as_study():
-    """Same shifts and numbers as mdgran.study.pooled_coincidence's loop (copied here)."""
+    """Same shifts and numbers as mdgran.studies.paper_study.pooled_coincidence's loop (copied
+    here)."""
     cases = study(1)
     per = [p for p in (co.coincidence_case(c.time, c.c_eff, c.rate, 5.0, c.window)
                        for c in cases) if p is not None]

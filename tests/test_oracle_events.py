@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from mdgran.backends import reference as ref_mod
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import make_backend, run
 
 STATE_CHECK = 1e-9  # p

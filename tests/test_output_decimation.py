@@ -13,11 +13,11 @@ import pytest
 
 from conftest import InterruptAt
 
-from mdgran.chain import model_from_scene
+from mdgran.model.chain import model_from_scene
 from mdgran.cli import main
-from mdgran.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
-from mdgran.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
-from mdgran.scene import SceneError, load_scene
+from mdgran.output.reporters import H5MD_BLOCK, H5MDWriter, buffer_frames, chunk_shape
+from mdgran.output.run_record import LEDGER_NAMES, DecimatedRecord, read_h5
+from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import run
 
 T_END, T_STOP = 40.0, 30.0  # micro-star (20 beads, 21 contacts): 14 events by t = 40

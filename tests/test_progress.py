@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from mdgran.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
-from mdgran.scene import load_scene
+from mdgran.output.progress import CompileNotice, ProgressReporter, RunSeries, fmt_seconds, is_tty
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 
@@ -117,7 +117,7 @@ def test_narrow_terminal_lines_fit_and_keep_their_role():
 
 @pytest.mark.parametrize("tty", [False, True])
 def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     monkeypatch.setenv("COLUMNS", "200")
     out = FakeTTY() if tty else io.StringIO()
@@ -139,7 +139,7 @@ def test_compare_lines_are_labelled_and_counted(tty, monkeypatch):
 
 
 def test_sweep_names_running_cases_while_they_run(tmp_path):
-    from mdgran.sweep import run_sweep
+    from mdgran.studies.sweep import run_sweep
 
     spec = tmp_path / "slow.toml"
     spec.write_text('[sweep]\nscene = "micro-star"\nbackend = "reference"\n\n[fixed]\n'
@@ -169,7 +169,7 @@ def twice(x):
 NOTICE_CHILD = """
 import io, sys
 sys.path.insert(0, sys.argv[1])
-from mdgran.progress import CompileNotice
+from mdgran.output.progress import CompileNotice
 import cached_twice
 out = io.StringIO()
 with CompileNotice("scene [fast]", stream=out):

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from mdgran.scene import SceneError
-from mdgran.study import (interval_over_realizations, realization_groups,
+from mdgran.model.scene import SceneError
+from mdgran.studies.paper_study import (interval_over_realizations, realization_groups,
                           realization_statistics, realizations_markdown, sweep_cases)
-from mdgran.sweep import load_sweep, run_sweep
+from mdgran.studies.sweep import load_sweep, run_sweep
 
 GRID = """
 [fixed]
@@ -30,7 +30,7 @@ def spec(tmp_path, head="", body=GRID, name="sw.toml"):
 
 
 def velocity(case):
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
 
     return load_scene("micro-star", case["overrides"]).data["impulse"]["velocity"]
 

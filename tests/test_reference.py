@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from mdgran.contact import ContactLaw, fc_from_lambda
-from mdgran.scene import load_scene
+from mdgran.model.contact import ContactLaw, fc_from_lambda
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 LAW = ContactLaw("schwarz", fc_from_lambda(0.64))

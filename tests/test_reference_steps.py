@@ -5,7 +5,7 @@ import pytest
 
 from mdgran.backends import reference as ref_mod
 from mdgran.backends.base import IntegrationError
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import make_backend
 
 KEYS = ["t", "y", "closed", "d_hyst", "h_last", "armed_out", "post_event", "i_out"]

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from mdgran.paper_figures import fit_slope
+from mdgran.studies.paper_figures import fit_slope
 
 
 def test_fit_slope_recovers_a_known_line_and_its_interval():
@@ -26,7 +26,7 @@ def test_report_small(tmp_path):
     from mdgran.cli import main
 
     out = tmp_path / "rep"
-    from mdgran.study import make_report
+    from mdgran.studies.paper_study import make_report
 
     nb = make_report(out, small=True, workers=2, duration=150.0, progress=False,
                      beyond=("lambda-range", "long-chain"))
@@ -62,7 +62,7 @@ def test_paper_details_reproduce_the_printed_table_and_the_pull_off_check_values
     """Table II's stress column is T_s / (pi L_s^2 / 4) (the printed 2.19 and 0.219 MPa), the
     stress in the wire T_s / A_s is 85.6 and 8.56 MPa; the COS relation overstates the exact
     Maugis-Dugdale pull-off by 10.8% at lambda = 0.64 (-1.852 against -1.672)."""
-    from mdgran.study import paper_details
+    from mdgran.studies.paper_study import paper_details
 
     pd = paper_details()
     micro, macro = pd["table_II"]

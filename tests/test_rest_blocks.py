@@ -16,9 +16,9 @@ from conftest import InterruptAt, make_scene
 
 from mdgran.api import run
 from mdgran.backends.fast import FastBackend
-from mdgran.chain import initial_states, touching_contacts
+from mdgran.model.chain import initial_states, touching_contacts
 from mdgran.rest_blocks import BLOCK, block_mask, column_runs, lazy_zeros
-from mdgran.scene import POSITIONS_AUTO_BEADS, load_scene
+from mdgran.model.scene import POSITIONS_AUTO_BEADS, load_scene
 
 OVER = [("run.duration", 20.0), ("run.output_interval", 1.0)]
 
@@ -73,7 +73,7 @@ def test_moved_frames_keep_their_promise_and_ledger(n, free, gap, law, v0, segme
     block's ``moved`` beads every x and v is +0.0 and every contact that touches none of them
     is in its initial state, and the ledger summed over the moved beads is bitwise the ledger
     summed over every bead (sums by blocks: a block of zeros changes no sum)."""
-    from mdgran import chain
+    from mdgran.model import chain
     from mdgran.backends import fast_kernel as fk
 
     scene = make_scene(chain={"n": n, "boundary": "free" if free else "fixed",

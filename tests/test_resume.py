@@ -20,7 +20,7 @@ import pytest
 
 from conftest import h5_datasets
 from mdgran.cli import main
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
 
@@ -128,7 +128,7 @@ def test_interrupt_before_the_first_frame_with_checkpoints(tmp_path, monkeypatch
     """Ctrl-C before the first frame (a first compile takes 15-25 s) with checkpoints on: the
     interrupt propagates as itself (it was a TypeError of the checkpoint, a traceback), and
     nothing is left to resume from: no output, no NAME.partial."""
-    from mdgran.chain import ChainModel
+    from mdgran.model.chain import ChainModel
 
     def stop(*args, **kwargs):
         raise KeyboardInterrupt

@@ -1,4 +1,4 @@
-"""The run record (mdgran.run_record.Run): stored contact states against the events replayed,
+"""The run record (mdgran.output.run_record.Run): stored contact states against the events replayed,
 a file written without states (an older mdgran's) read back the same, the scene read from the
 file, one ledger-error scale, and the cached measures computed once each."""
 import importlib
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mdgran import analysis as an
-from mdgran.chain import contact_numbers, replay_states
-from mdgran.run_record import Run, ledger_scale, read_h5
-from mdgran.scene import builtin_scenes, load_scene
+from mdgran.model.chain import contact_numbers, replay_states
+from mdgran.output.run_record import Run, ledger_scale, read_h5
+from mdgran.model.scene import builtin_scenes, load_scene
 from mdgran.simulation import run
 
 

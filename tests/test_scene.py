@@ -5,7 +5,7 @@ import pickle
 
 import pytest
 
-from mdgran.scene import SCHEMA, SceneError, builtin_scenes, load_scene
+from mdgran.model.scene import SCHEMA, SceneError, builtin_scenes, load_scene
 
 # keys with two ways of being given (fc for lambda; SI for nondimensional); micro-star has a
 # [material] and a schwarz law
@@ -40,7 +40,7 @@ def test_with_overrides_rejects_bad_key_naming_it(key):
 def test_a_resolved_scene_resolves_again_to_itself(name):
     """Resolved data stores absent keys as None (lambda of a jkr, dmt or hertz scene); resolving
     it again, as native_lammps.probe_force does with a modified copy, gives the same data."""
-    from mdgran.scene import resolve
+    from mdgran.model.scene import resolve
 
     sc = load_scene(name)
     data = {k: dict(v) for k, v in sc.data.items()}

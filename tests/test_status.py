@@ -12,7 +12,7 @@ import pytest
 
 from mdgran.backends import BACKENDS
 from mdgran.cli import main
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 from mdgran.simulation import LEDGER_EXCEEDED, run
 
 DEFECT = "ledger-defect"
@@ -93,7 +93,7 @@ def test_injected_ledger_defect_is_flagged(defect_backend, tmp_path, capsys):
 
 
 def test_sweep_and_report_list_cases_over_their_bound(defect_backend, tmp_path, capsys):
-    from mdgran.study import run_status, status_markdown, sweep_cases
+    from mdgran.studies.paper_study import run_status, status_markdown, sweep_cases
 
     spec = tmp_path / "defect.toml"
     spec.write_text(f'[sweep]\nscene = "micro-star"\nbackend = "{DEFECT}"\n'
@@ -121,7 +121,7 @@ def test_sweep_and_report_list_cases_over_their_bound(defect_backend, tmp_path, 
 
 
 def test_compare_does_not_pass_a_run_over_its_bound(defect_backend):
-    from mdgran.compare import compare
+    from mdgran.crosscheck.compare import compare
 
     sc = load_scene("micro-star", [("run.duration", 10.0)])
     rep = compare(sc, ("reference", DEFECT), ensemble=0)

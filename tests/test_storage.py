@@ -1,9 +1,10 @@
-"""mdgran.storage's atomic write: the whole new text in place of the old, no temporary left."""
+"""mdgran.output.storage's atomic write: the whole new text in place of the old, no temporary
+left."""
 import os
 
 import pytest
 
-from mdgran.storage import temporary_path, write_atomic
+from mdgran.output.storage import temporary_path, write_atomic
 
 
 def test_write_atomic_replaces_the_file_whole_and_leaves_no_temporary(tmp_path):

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from mdgran.scene import SceneError
-from mdgran.sweep import load_sweep, run_sweep
+from mdgran.model.scene import SceneError
+from mdgran.studies.sweep import load_sweep, run_sweep
 
 
 def test_paper_robustness_spec():
@@ -67,7 +67,7 @@ def test_sweep_on_another_backend_and_no_mixing(tmp_path, capsys):
     assert main(args + ["--backend", "fast"]) == 0
     spec = json.loads((out / "sweep.json").read_text())
     assert spec["backend"] == "fast"
-    from mdgran.run_record import read_h5
+    from mdgran.output.run_record import read_h5
 
     assert read_h5(out / "cases" / "0000.h5").backend == "fast"
     capsys.readouterr()
@@ -81,7 +81,7 @@ def test_a_sweep_keeps_to_its_scene(tmp_path, monkeypatch):
     scene file changed since the sweep started is refused in one line, and a case started
     after the change fails rather than run another scene (cases of chain.n 10 and 12 were
     mixed in one sweep, all complete)."""
-    from mdgran.sweep import load_sweep, run_case, scene_digest
+    from mdgran.studies.sweep import load_sweep, run_case, scene_digest
 
     folder = tmp_path / "study"
     folder.mkdir()
@@ -106,7 +106,7 @@ def test_one_sweep_per_folder_at_a_time(tmp_path):
     """A second sweep on a folder another is running in is refused in one line (two sweeps
     on one folder recorded a case 'failed: FileNotFoundError', each removing the other's
     temporaries); the folder is free again once the first ends."""
-    from mdgran.storage import OutputLock
+    from mdgran.output.storage import OutputLock
 
     spec = tmp_path / "s.toml"
     spec.write_text('[sweep]\nscene = "micro-star"\n[fixed]\n"run.duration" = 1.0\n[grid]\n'

@@ -2,8 +2,8 @@
 
 Every test runs ``python -m mdgran sweep`` as a subprocess.  Faults are put into the workers by
 a ``sitecustomize`` module that the test writes and puts on the subprocess's PYTHONPATH (test
-code only: the library has no fault switch): it wraps ``mdgran.sweep.run_case`` so that chosen
-cases raise, kill their own worker with SIGKILL, or sleep first (slow cases, for signals sent
+code only: the library has no fault switch): it wraps ``mdgran.studies.sweep.run_case`` so that
+chosen cases raise, kill their own worker with SIGKILL, or sleep first (slow cases, for signals sent
 mid-sweep).  Worker pids are read from /proc (the main process's children), not from psutil.
 """
 import json
@@ -26,8 +26,8 @@ import time
 
 _spec = os.environ.get("MDGRAN_TEST_FAULTS")
 if _spec:
-    import mdgran.sweep as _sw
-    from mdgran.scene import SceneError
+    import mdgran.studies.sweep as _sw
+    from mdgran.model.scene import SceneError
 
     _real = _sw.run_case
 
@@ -134,7 +134,7 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path):
         assert (out / "cases" / f"{i:04d}.h5").exists()
     assert not list((out / "cases").glob("*.tmp-*"))
     # mdgran report takes the sweep and names the failed cases in its run status
-    from mdgran.study import check_sweep_files, status_markdown
+    from mdgran.studies.paper_study import check_sweep_files, status_markdown
 
     failed_rows = check_sweep_files(out)
     assert [r["index"] for r in failed_rows] == [1, 2, 4]

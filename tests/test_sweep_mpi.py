@@ -38,10 +38,10 @@ def _mpi_sweep(spec, out, ranks=3, extra=(), timeout=240):
 
 
 def test_mpi_sweep_writes_every_case_and_report_uses_them_all(tmp_path, capsys):
-    from mdgran import paper_figures as pf
-    from mdgran import study
+    from mdgran.studies import paper_figures as pf
+    from mdgran.studies import paper_study as study
     from mdgran.cli import main
-    from mdgran.sweep import run_sweep
+    from mdgran.studies.sweep import run_sweep
 
     spec = tmp_path / "eight.toml"
     spec.write_text('[sweep]\nscene = "micro-star"\nbackend = "reference"\n\n[fixed]\n'
@@ -97,7 +97,7 @@ def test_lammps_sweep_on_mpi_ranks_does_not_deadlock(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     summ = json.loads((out / "summary.json").read_text())
     assert summ["cases"] == 4 and summ["complete"] == 4
-    from mdgran.trajectory import read_h5
+    from mdgran.output.run_record import read_h5
 
     for i in range(4):
         assert read_h5(out / "cases" / f"{i:04d}.h5").backend == "lammps"

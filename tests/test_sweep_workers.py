@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from mdgran.sweep import run_case, run_sweep, worker_cores
+from mdgran.studies.sweep import run_case, run_sweep, worker_cores
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "reference"))
 from check_bitwise import datasets, same  # noqa: E402

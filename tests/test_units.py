@@ -1,7 +1,7 @@
 """Scales against the paper's Table I and Table II."""
 import pytest
 
-from mdgran.units import contact_modulus, scales_from_material, wire_tension, work_of_adhesion
+from mdgran.model.units import contact_modulus, scales_from_material, wire_tension, work_of_adhesion
 
 
 def test_work_of_adhesion():

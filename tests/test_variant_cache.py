@@ -20,7 +20,7 @@ CHILD = r"""
 import json, sys
 import numpy as np
 from mdgran import run
-from mdgran.scene import load_scene
+from mdgran.model.scene import load_scene
 N = int(sys.argv[1])
 CASES = {"warm": ("collision-pair", []),
          "homogeneous": ("micro-star", [("chain.n", N)]),

@@ -17,8 +17,8 @@ import pytest
 import mdgran
 from mdgran.backends.lammps import backend as lammps_backend
 from mdgran.backends.lammps import plugin as native_plugin
-from mdgran.scene import SCENE_DIR
-from mdgran.sweep import SWEEP_DIR
+from mdgran.model.scene import SCENE_DIR
+from mdgran.studies.sweep import SWEEP_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(mdgran.__file__).resolve().parent

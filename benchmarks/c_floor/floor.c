@@ -1,7 +1,7 @@
 /* The compiled floor of the fast backend's per-step work (mdgran/backends/fast_kernel.py,
  * verlet_pass with locate = True): velocity Verlet with the predicted end velocity for the
  * damping force, nearest-neighbour contact forces (the cubic spline table in
- * w = sqrt(delta - base) of mdgran.contact.ContactTable, or Hertz delta^1.5), open/closed
+ * w = sqrt(delta - base) of mdgran.model.contact.ContactTable, or Hertz delta^1.5), open/closed
  * states with the locate filter test (flags counted, not located), substrate k1, one-sided
  * damping, the damping power sum; two alternating buffers of (x, v, a) as the kernel has.
  *

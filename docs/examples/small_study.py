@@ -10,7 +10,7 @@
    the characteristic period ``T_c``, the kinetic-energy decay time, clusters formed, the time
    mean and peak of the effective damping ``C_eff / C_+`` (Eq. 9);
 4. prints a table, checks that the backends agree on the early motion (displacements over the
-   first ``T_c``) within ``mdgran.compare.PREDICTABLE`` = 0.01 p, the level up to which
+   first ``T_c``) within ``mdgran.crosscheck.compare.PREDICTABLE`` = 0.01 p, the level up to which
    ``mdgran compare`` judges single trajectories; and
 5. saves ``OUT_DIR/small_study.png`` (kinetic energy and ``C_eff / C_+`` against time) and
    ``OUT_DIR/summary.json`` (the table's numbers).
@@ -59,7 +59,7 @@ def measures(traj) -> dict:
 def main(argv=None) -> int:
     import numpy as np
 
-    from mdgran.compare import PREDICTABLE
+    from mdgran.crosscheck.compare import PREDICTABLE
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="folder for the runs, the figure and summary.json")

@@ -5,7 +5,7 @@ A long chain
 A pulse in a chain of 100,000 beads on the fast backend. Beyond the pulse every bead is at
 rest, and the fast backend steps only the beads in motion (its activity front), so the run
 costs what the pulse reaches, not the chain's length. No file is written: a reporter,
-:class:`~mdgran.long_chain.PulseTracker`, keeps per bead its largest speed and when it was
+:class:`~mdgran.studies.long_chain.PulseTracker`, keeps per bead its largest speed and when it was
 reached, as the frames go by.
 """
 import time
@@ -14,8 +14,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mdgran
-from mdgran.chain import model_from_scene
-from mdgran.long_chain import PulseTracker, pulse_profile
+from mdgran.model.chain import model_from_scene
+from mdgran.studies.long_chain import PulseTracker, pulse_profile
 
 n, v0 = 100_000, 12.0
 scene = mdgran.load_scene("micro-star", [("chain.n", n), ("impulse.velocity", v0),

@@ -11,9 +11,9 @@ Modules, one idea each (all nondimensional, bead mass 1, time in 1/q, energy in 
 * :mod:`.coincidence`: do C_eff peaks coincide with re-clustering-rate peaks?
 * :mod:`.nulls`: null models of the Fig. 7 slope and selection-free alternatives.
 
-:func:`run_summary` condenses a run into scalars for :mod:`mdgran.sweep`.  The functions of a
-whole run take a :class:`~mdgran.run_record.Run` (its scene, contact states and events come
-with it); ``run.measures`` (:class:`~mdgran.measures.Measures`) computes each measure once.
+:func:`run_summary` condenses a run into scalars for :mod:`mdgran.studies.sweep`.  The functions of
+a whole run take a :class:`~mdgran.output.run_record.Run` (its scene, contact states and events come
+with it); ``run.measures`` (:class:`~mdgran.output.measures.Measures`) computes each measure once.
 """
 from __future__ import annotations
 
@@ -46,10 +46,10 @@ from .wavelet import default_omegas, morlet_cwt, peak_frequency, wavelet_spectru
 
 def run_summary(traj, *, smoothing_time: float = SMOOTHING_TIME,
                 merge_within: float = MERGE_WITHIN, c_eff=None, reclustering=None) -> dict:
-    """Scalars of one run (a :class:`~mdgran.run_record.Run`) for a sweep's case summary
+    """Scalars of one run (a :class:`~mdgran.output.run_record.Run`) for a sweep's case summary
     (undefined values are ``None``); ``c_eff``, ``reclustering``: the run's
     :func:`effective_damping` and :func:`analyze_reclustering` at the same settings, if already
-    computed (:class:`~mdgran.measures.Measures` passes its own).
+    computed (:class:`~mdgran.output.measures.Measures` passes its own).
 
     * ``c_eff_max_segment``: largest segment-mean ``C_eff / C_+`` (the representative segment,
       Sec. VI; all segments but the last); ``c_eff_max_segment_rate``: that segment's

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chain import contact_numbers, initial_states, replay_states  # noqa: F401 - re-exported
+from ..model.chain import contact_numbers, initial_states, replay_states  # noqa: F401 - re-exported
 from .effective_damping import SMOOTHING_TIME
 
 #: Events closer than this (time units 1/q) form one re-clustering event.  About half the fast
@@ -66,7 +66,7 @@ def contact_states(times, ev_time, ev_contact, ev_kind, n: int, walls: bool = Tr
     """Contact states at each of ``times``: bool ``[F, n_contacts]`` (True = closed).
 
     A frame at time ``t`` shows every event with ``ev_time <= t`` applied
-    (:func:`~mdgran.chain.replay_states`).
+    (:func:`~mdgran.model.chain.replay_states`).
     """
     init = initial_states(n, walls) if initial is None else np.asarray(initial, bool)
     return replay_states(init, ev_time, ev_contact, ev_kind, times, walls)
@@ -149,7 +149,7 @@ def cluster_history(ev_time, ev_contact, ev_kind, n: int, walls: bool = True, in
 
 
 def trajectory_history(run, *, attach: bool = True, min_size: int = 1) -> ClusterHistory:
-    """:func:`cluster_history` of a run (a :class:`~mdgran.run_record.Run`)."""
+    """:func:`cluster_history` of a run (a :class:`~mdgran.output.run_record.Run`)."""
     return cluster_history(run.ev_time, run.ev_contact, run.ev_kind, run.n, run.walls,
                            run.initial_states(), attach, min_size)
 
@@ -293,7 +293,7 @@ def analyze_reclustering(run, c_eff, *, smoothing_time: float = SMOOTHING_TIME,
                          min_size: int = 1, history: ClusterHistory | None = None
                          ) -> ReclusteringAnalysis:
     """Clusters, segments, smoothed rate and segment measures of a run (a
-    :class:`~mdgran.run_record.Run`), given its ``c_eff`` [F] (normally
+    :class:`~mdgran.output.run_record.Run`), given its ``c_eff`` [F] (normally
     :func:`~.effective_damping.effective_damping`); ``history``: its
     :func:`trajectory_history` with the same ``attach`` and ``min_size``, if already known."""
     hist = trajectory_history(run, attach=attach, min_size=min_size) if history is None \

@@ -148,8 +148,8 @@ def pooled_coincidence_test(per_case, n_shifts: int = 10000, seed: int = 0) -> d
     """Coincidence pooled over cases: the fraction of all ``a`` peaks within their case's window
     of a ``b`` peak of their case, against every case's ``b`` shifted circularly and
     independently (``per_case``: :func:`coincidence_case` tuples; None entries are skipped).
-    The shifts are drawn as ``mdgran.study.pooled_coincidence`` draws them (same seed, same
-    null), all at once.  Returns ``cases``, ``c_eff_peaks``, ``rate_peaks``, ``fraction``,
+    The shifts are drawn as ``mdgran.studies.paper_study.pooled_coincidence`` draws them (same seed,
+    same null), all at once.  Returns ``cases``, ``c_eff_peaks``, ``rate_peaks``, ``fraction``,
     ``null_mean``, ``null_std``, ``p_value``, ``n_shifts``, ``p_floor``, ``z`` (``(fraction -
     null_mean) / null_std``: when p is at its floor, how far beyond), ``null`` [K]."""
     per_case = [p for p in per_case if p is not None]
@@ -179,8 +179,8 @@ def pooled_channel_coincidence(cases, window_frac: float = 0.25, prominence: flo
     ``cases``: mappings with ``"curves" = (time, c_eff_total, rate)``, ``"channels" = {name:
     c_eff [F]}`` (e.g. :func:`~.effective_damping.channel_damping` without ``"total"``),
     ``"characteristic_period"`` and ``"last_reclustering_time"`` (the rows of
-    ``mdgran.study.sweep_cases`` plus ``"channels"``).  Window ``window_frac x T_c``; ``active``:
-    each case from its start to one ``T_c`` after its last re-clustering event (as
+    ``mdgran.studies.paper_study.sweep_cases`` plus ``"channels"``).  Window ``window_frac x T_c``;
+    ``active``: each case from its start to one ``T_c`` after its last re-clustering event (as
     ``study.pooled_coincidence(active=True)``).  Returns ``{"total", name...}`` -> result (without
     ``null``), each with ``window_T_c``, ``prominence``, ``range``."""
     per = {}

@@ -185,7 +185,7 @@ def contact_damping(scene) -> float:
 def effective_damping(run, *, smoothing_time: float = SMOOTHING_TIME,
                       interpolant: str = "cubic") -> np.ndarray:
     """Normalized effective damping ``C_eff(t) / C_+`` of a run (a
-    :class:`~mdgran.run_record.Run`), [F] (dimensionless).
+    :class:`~mdgran.output.run_record.Run`), [F] (dimensionless).
 
     Example::
 

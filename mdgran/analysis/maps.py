@@ -47,7 +47,7 @@ def relative_velocity_map(traj, walls: bool = True, window: float = 0.0) -> np.n
 
 def states_map(traj) -> np.ndarray:
     """Contact states at every frame, True = closed [F, n_contacts]: the run's stored states
-    (:attr:`~mdgran.run_record.Run.closed`)."""
+    (:attr:`~mdgran.output.run_record.Run.closed`)."""
     return np.asarray(traj.closed, bool)
 
 

@@ -101,7 +101,7 @@ def cluster_modes_in_run(traj, cluster, t0: float, t1: float):
 
     Returns ``(omega [b], shapes [b, b], mean_compressions)``.
     """
-    from ..chain import contact_columns, model_from_scene
+    from ..model.chain import contact_columns, model_from_scene
 
     model = model_from_scene(traj.scene)
     sel = (traj.time >= t0) & (traj.time <= t1)

@@ -3,7 +3,7 @@
 **Fig. 7** (paper Sec. VI): each case contributes one point, the segment with the largest mean
 ``C_eff / C_+`` (:func:`~.clusters.representative_segment`) at ``x = log10 r_m`` (its
 re-clustering rate) and ``y = C_eff,m``; the figure's slope is the least-squares slope of y on x
-(``mdgran.paper_figures.fit_slope``).  Choosing the maximum favours short segments: a short
+(``mdgran.studies.paper_figures.fit_slope``).  Choosing the maximum favours short segments: a short
 segment's mean is an average over little time, so it scatters more and wins the maximum more
 often, and a short segment has a high rate ``r_m = new / lifespan`` by construction.  The slope
 is then positive even with no link between damping and re-clustering.  The nulls below measure

@@ -33,7 +33,8 @@ SPEC_WORDS = {
 
 
 #: option -> (kind, what is allowed): the options a spec or a keyword may give a backend, checked
-#: as scene keys are (:mod:`mdgran.scene`'s kinds; ``OPTION_LIMITS`` bounds numbers) before the
+#: as scene keys are (:mod:`mdgran.model.scene`'s kinds; ``OPTION_LIMITS`` bounds numbers) before
+# the
 #: backend is built; options that are objects (``comm``, ``extra_commands``, ``table_file``)
 #: are the backend's to check, and one a backend does not take is refused by it
 OPTION_RULES = {
@@ -52,9 +53,9 @@ OPTION_LIMITS = {"table_points": (16, 1_000_000), "delta_max": (1.0, 1e4)}
 
 def check_options(name: str, options: dict) -> dict:
     """``options`` of backend ``name`` checked against :data:`OPTION_RULES` (numbers as the
-    numbers they are); a bad one is a :class:`~mdgran.scene.SceneError` on key
+    numbers they are); a bad one is a :class:`~mdgran.model.scene.SceneError` on key
     ``NAME:OPTION``, one line saying what is allowed."""
-    from ..scene import SceneError, _check_value
+    from ..model.scene import SceneError, _check_value
 
     out = dict(options)
     for key, value in options.items():

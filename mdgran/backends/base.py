@@ -5,8 +5,8 @@ yields one :class:`Frame` per stored output time, the first at ``t = 0``;
 ``backend.blocks()`` yields the same frames as blocks of consecutive ones (:class:`Frames`),
 which the driver iterates.  Each frame carries
 the contact events since the previous frame.  The ledger (energies) is computed from the frame
-by the shared :class:`~mdgran.chain.ChainModel`, so every backend's ledger means the same thing.
-Writing output, progress and energy checks are reporters (see :mod:`mdgran.simulation`), not
+by the shared :class:`~mdgran.model.chain.ChainModel`, so every backend's ledger means the same
+thing. Writing output, progress and energy checks are reporters (see :mod:`mdgran.simulation`), not
 the backend's business.
 """
 from __future__ import annotations
@@ -71,10 +71,10 @@ class Frame:
     events: list = field(default_factory=list)  # Events in (previous frame time, time]
     block: "Frames | None" = None
     block_row: int = 0
-    external_work: float = 0.0  # work of the force pulse and base motion (mdgran.drive)
+    external_work: float = 0.0  # work of the force pulse and base motion (mdgran.model.drive)
 
     def ledger(self, model) -> dict:
-        """The energy ledger of this frame (:meth:`~mdgran.chain.ChainModel.ledger` of
+        """The energy ledger of this frame (:meth:`~mdgran.model.chain.ChainModel.ledger` of
         ``model``, the backend's), from its block's if it has one (bitwise the same)."""
         if self.block is not None:
             return self.block.ledger_row(self.block_row)
@@ -92,7 +92,7 @@ class Frames:
     (no excitation: 0); ``events``: the :class:`Event` s of the F frames in order, the first
     ``event_ends[k]`` of them in frames ``0 .. k``.  The arrays are the block's own: nobody
     changes them after.  :meth:`ledger` is computed once, for every frame together
-    (:meth:`~mdgran.chain.ChainModel.ledger_block`: bitwise each frame's own ledger, or, with
+    (:meth:`~mdgran.model.chain.ChainModel.ledger_block`: bitwise each frame's own ledger, or, with
     ``moved``, equal to it to round-off).
 
     ``moved``: None, or the 0-based bead range ``(lo, hi)`` (``lo .. hi - 1``) outside which,
@@ -141,7 +141,7 @@ class Frames:
     def contact_series(self) -> dict:
         """``{"compression": [F, n_contacts], "force": [F, n_contacts]}``: each frame's
         contact compressions and forces (``ChainModel.compressions`` and
-        :meth:`~mdgran.chain.ChainModel.contact_forces`: the force the backend integrates),
+        :meth:`~mdgran.model.chain.ChainModel.contact_forces`: the force the backend integrates),
         computed on first use."""
         if self._contacts is None:
             m = self.model
@@ -152,7 +152,8 @@ class Frames:
         return self._contacts
 
     def ledger_row(self, k: int) -> dict:
-        """Frame ``k``'s ledger as :meth:`~mdgran.chain.ChainModel.ledger` gives it (floats)."""
+        """Frame ``k``'s ledger as :meth:`~mdgran.model.chain.ChainModel.ledger` gives it
+        (floats)."""
         if self._rows is None:
             led = self.ledger()
             names = tuple(led)
@@ -182,8 +183,9 @@ MIN_STEPS = 10
 
 def steps_per_frame(dt: float, interval: float) -> int:
     """Steps of ``dt`` in one output interval ``run.output_interval`` (same time unit), which
-    ``dt`` must divide to a relative 1e-9; else :class:`~mdgran.scene.SceneError` on ``run.dt``."""
-    from ..scene import SceneError
+    ``dt`` must divide to a relative 1e-9; else :class:`~mdgran.model.scene.SceneError` on
+    ``run.dt``."""
+    from ..model.scene import SceneError
 
     steps = int(round(interval / dt))
     if steps < 1 or abs(steps * dt - interval) > 1e-9 * interval:
@@ -192,12 +194,12 @@ def steps_per_frame(dt: float, interval: float) -> int:
 
 
 def check_excitation_steps(model, dt: float, backend: str):
-    """Refuse (:class:`~mdgran.scene.SceneError`) a force pulse shorter than
+    """Refuse (:class:`~mdgran.model.scene.SceneError`) a force pulse shorter than
     :data:`MIN_STEPS` steps of ``dt`` (``pulse.duration``), or a base motion whose samples
     are closer than that (``base.interval``): a fixed-step backend samples the excitation at
     its steps and steps over what happens between them (a pulse of one step's length did no
     work, a one-sample spike of the base none, and the run was complete)."""
-    from ..scene import SceneError
+    from ..model.scene import SceneError
 
     drive = model.drive
     if drive is None:
@@ -246,8 +248,8 @@ class Backend:
     supports: frozenset = frozenset()
 
     def __init__(self, scene, **options):
-        from ..chain import model_from_scene
-        from ..scene import SceneError
+        from ..model.chain import model_from_scene
+        from ..model.scene import SceneError
 
         unknown = [k for k in options if k not in self.accepted_options]
         if unknown:
@@ -340,8 +342,8 @@ class Backend:
     def checkpoint_state(self) -> dict | None:
         """The state to continue from the last yielded frame, or None if the backend cannot
         checkpoint (then runs are not resumable).  A flat dict of arrays and JSON scalars with
-        at least ``i_out`` (the last frame's index); stored opaquely (:mod:`mdgran.checkpoint`)
-        and handed back to :meth:`frames` as ``resume``."""
+        at least ``i_out`` (the last frame's index); stored opaquely
+        (:mod:`mdgran.output.checkpoint`) and handed back to :meth:`frames` as ``resume``."""
         return None
 
     @property

@@ -15,7 +15,7 @@ The method (details and equations in :mod:`mdgran.backends.fast_kernel`):
   step, as a fixed-step MD code does: first order through events), for comparison.
 
 Options (``run(scene, "fast", **options)``): ``locate_events`` (True), ``contact_eval``
-(``"table"``: :class:`~mdgran.contact.ContactTable`, a cubic spline in ``sqrt(delta -
+(``"table"``: :class:`~mdgran.model.contact.ContactTable`, a cubic spline in ``sqrt(delta -
 delta_min)`` on ``table_points`` nodes (its default if None) up to ``delta_max``; ``"exact"``:
 Newton inversion of the law at every evaluation, slower), ``dt`` (overrides ``run.dt``).  A compression beyond ``delta_max``
 stops the run with :class:`IntegrationError`.
@@ -32,7 +32,7 @@ frames cost no Python each; :meth:`FastBackend.frames` unpacks them.
 
 Example::
 
-    from mdgran.scene import load_scene
+    from mdgran.model.scene import load_scene
     from mdgran.simulation import run
     res = run(load_scene("micro-star", [("run.duration", 50.0)]), "fast")
 """
@@ -47,9 +47,9 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from ..contact import ContactTable
-from ..contact_scalar import SING_BAND, schwarz_constants
-from ..scene import SceneError
+from ..model.contact import ContactTable
+from ..model.contact_scalar import SING_BAND, schwarz_constants
+from ..model.scene import SceneError
 from . import fast_kernel as fk
 from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
                    check_excitation_steps, steps_per_frame)
@@ -304,9 +304,9 @@ class FastBackend(Backend):
                                f"t = {t:.12g}, contact {num}")
 
     def checkpoint_state(self) -> dict | None:
-        """The state at the last yielded frame (stored opaquely by :mod:`mdgran.checkpoint`): ``y`` =
-        ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's own,
-        so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
+        """The state at the last yielded frame (stored opaquely by :mod:`mdgran.output.checkpoint`):
+        ``y`` = ``[x, v, a, D_viscous, P]`` (``a`` and the damping power ``P`` are the integrator's
+        own, so a resumed run is bitwise identical), then ``[W, P_ext]`` with excitations,
         ``closed``, ``d_hyst``, ``i_out``; None before the first frame."""
         if getattr(self, "_last", None) is None:
             return None

@@ -98,9 +98,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ..contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
-                              schwarz_mean_force_of_branch,
-                              spline_cubic)
+from ..model.contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
+                                    schwarz_mean_force_of_branch,
+                                    spline_cubic)
 
 # status codes (counters.status)
 OK, OUT_OF_TABLE, CHATTER, TOO_MANY_SUBSTEPS, EVENTS_FULL, EVENT_OVERFLOW = 0, 1, 2, 3, 4, 5

@@ -4,7 +4,7 @@ Between contact events the equations of motion are smooth and are integrated wit
 DOP853 (explicit Runge-Kutta of order 8, dense output of order 7) at ``rtol = atol =
 run.tolerance``.  The state vector is ``[x (n), v (n), D_viscous]``: the viscous dissipation is
 integrated with the motion, so the energy ledger closes to the integrator's accuracy.  A scene
-with a force pulse or a base motion (:mod:`mdgran.drive`) adds their work ``W`` as a last
+with a force pulse or a base motion (:mod:`mdgran.model.drive`) adds their work ``W`` as a last
 component, ``[x, v, D_viscous, W]``, integrated the same way.
 
 **Events.**  Every contact has an event function that is positive inside its current state::

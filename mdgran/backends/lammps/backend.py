@@ -37,7 +37,7 @@ compiled (:mod:`mdgran.backends.lammps.hook`, numba):
   call of a ``run``).  The contact energy (exact law, summed over the ranks) is handed to LAMMPS
   with ``fix_external_set_energy_global`` at thermo steps, so ``thermo`` shows it
   (``f_contact``).
-* **Force evaluation** from :class:`mdgran.contact.ContactTable` (4001 nodes uniform in
+* **Force evaluation** from :class:`mdgran.model.contact.ContactTable` (4001 nodes uniform in
   ``sqrt(delta - delta_min)``, cubic spline in that variable; 2e-12 absolute force error), written
   as a LAMMPS-style table file next to the run; ``contact_eval = "exact"`` uses the Newton
   inversion instead.  A compression beyond the table's ``delta_max`` stops the run.
@@ -56,7 +56,7 @@ compiled (:mod:`mdgran.backends.lammps.hook`, numba):
   unlike beads between walls) and velocities (thermal plus impulse) from
   :meth:`ChainModel.initial_state` (:meth:`LammpsBackend._initial_state`).  The homogeneous
   chain takes none of these branches.
-* **Force pulses and base motions** (``[pulse]``, ``[base]``, :mod:`mdgran.drive`): evaluated
+* **Force pulses and base motions** (``[pulse]``, ``[base]``, :mod:`mdgran.model.drive`): evaluated
   at the time LAMMPS's velocity Verlet evaluates the step's forces, the end of its position
   update ``t = step dt`` (located: each pass's end); the substrate acts on ``u - u_b`` and
   ``w - u_b'``, the pulse pushes its bead.  Their work ``W`` is integrated by the trapezoidal
@@ -81,10 +81,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...chain import first_contact
-from ...contact import ContactTable
+from ...model.chain import first_contact
+from ...model.contact import ContactTable
 from .env import LammpsUnavailable, check_available, new_lammps
-from ...scene import SceneError
+from ...model.scene import SceneError
 from ...signals import deferred
 from . import plugin as native_plugin
 from ..base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
@@ -718,7 +718,7 @@ class LammpsBackend(Backend):
     def _hull_frame(self, k, t) -> Frames:
         """Frame ``k`` as a block of one, from the beads of the moved hull alone: the others
         hold ``x = v = +0.0`` and their contacts the initial state."""
-        from ...chain import initial_states, touching_contacts
+        from ...model.chain import initial_states, touching_contacts
         from ...rest_blocks import lazy_zeros
 
         self._read_native_sums()

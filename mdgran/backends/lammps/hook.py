@@ -22,8 +22,8 @@ Per contact ``k`` (left atom tag ``k``, right ``k + 1``; compression
   atom records the event with its time interpolated linearly in ``delta`` within the step
   and, on opening, the energy ``V(delta)`` lost to hysteresis;
 * a closed contact's force ``F = f(delta) + c rate`` (``f`` from the spline table of
-  :class:`mdgran.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the right
-  atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3`` and the
+  :class:`mdgran.model.contact.ContactTable`, Horner form, or the exact law by Newton) pushes the
+  right atom by ``+F`` and the left one by ``-F``; every moving atom also gets ``-k3 u^3`` and the
   linear substrate ``-k u`` (chain.in's ``fix spring/self``, which the backend removes: its
   per-atom ``domain->unmap`` call cost ~5 ns per bead-step; ``k`` is that fix's stiffness,
   :func:`tether_stiffness`, and LAMMPS's force the same number, ``0 + (F - k u)`` against
@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...contact_scalar import (SchwarzConstants, hertz_energy, hertz_force,
+from ...model.contact_scalar import (SchwarzConstants, hertz_energy, hertz_force,
                               schwarz_constants, schwarz_energy_libm, schwarz_force_libm,
                               spline_cubic, spline_locate)
 from ..fast_kernel import variant_jit
@@ -90,7 +90,7 @@ VARIANT_FLAGS = ("table", "mixed", "sub_damped", "driven")
 
 
 class HookTable(NamedTuple):
-    """The force table of :class:`mdgran.contact.ContactTable` (zeros without one): the cubic
+    """The force table of :class:`mdgran.model.contact.ContactTable` (zeros without one): the cubic
     of interval ``i`` in ``w = sqrt(delta - base)`` (``coef[i]``, highest power first, in ``w -
     w_i``), ``scale = 1 / h`` intervals per unit of ``w``, coordinates clamped to ``top``."""
 
@@ -127,7 +127,7 @@ class HookMix(NamedTuple):
     entries, entry 0 unused; wall atoms have mass 1 and factor 0, never read): bead mass
     ``1 / inv_mass``, substrate factor ``on_site`` (``g``: 1 on the substrate, 0 free) and, for
     the contact whose left atom has the tag, the scales of
-    :class:`~mdgran.mixture.Mixture` (``F = scale f(delta / L)``, ``V = scale L V(delta /
+    :class:`~mdgran.model.mixture.Mixture` (``F = scale f(delta / L)``, ``V = scale L V(delta /
     L)``), its opening threshold ``delta_off = L delta_off(fc_k)`` (units p) and its law class
     ``cls``.  Each class has a row of law constants (``laws``, the fields of
     :class:`SchwarzConstants`), of table numbers (``tables``, columns ``T_*``) and its table's
@@ -148,7 +148,7 @@ class HookMix(NamedTuple):
 
 
 class HookDrive(NamedTuple):
-    """The excitations of a driven scene (:mod:`mdgran.drive`) in the hook
+    """The excitations of a driven scene (:mod:`mdgran.model.drive`) in the hook
     (:func:`drive_parameters`): the half-sine pulse ``amp sin(pi (t - start) / duration)`` on
     the atom with tag ``pulse_tag`` (0: no pulse) and the base motion's cubics ``coef[k]``
     (highest power first, in ``t - k step``; the last row after the samples; ``base`` 0: no
@@ -226,7 +226,7 @@ def hook_flags(model, law, table) -> HookFlags:
 
 
 def hook_table(table) -> HookTable:
-    """The :class:`HookTable` of a :class:`~mdgran.contact.ContactTable` (None: zeros)."""
+    """The :class:`HookTable` of a :class:`~mdgran.model.contact.ContactTable` (None: zeros)."""
     if table is None:
         return HookTable(np.zeros((1, 4)), 0.0, 0.0, 0.0, 0.0, 0.0)
     return HookTable(table.f_coef, float(table.base), float(table._scale), float(table._h),
@@ -236,7 +236,7 @@ def hook_table(table) -> HookTable:
 def chain_constants(model, law, table, dt, tether=False) -> Chain:
     """The :class:`Chain` of a chain model, its law and (optional) table; ``tether``: the hook
     applies the linear substrate in place of ``fix spring/self``.  The law's constants are
-    :class:`mdgran.contact.ContactLaw`'s own (the Python floats its numpy methods use)."""
+    :class:`mdgran.model.contact.ContactLaw`'s own (the Python floats its numpy methods use)."""
     return Chain(float(model.gap), float(model.damping), float(model.k1), float(model.k3),
                  tether_stiffness(model.k1) if tether else 0.0, float(dt),
                  float(law.delta_off), model.n + 2 if model.walls else model.n,
@@ -253,10 +253,10 @@ def no_mix(sub_damping=0.0) -> HookMix:
 def mix_parameters(model, table_points=None) -> HookMix:
     """The :class:`HookMix` of a chain model with unlike beads (``model.mixture``) or substrate
     damping; ``table_points``: nodes of each class's force table
-    (:class:`~mdgran.contact.ContactTable` to ``delta_max = 100`` in the class's own units),
+    (:class:`~mdgran.model.contact.ContactTable` to ``delta_max = 100`` in the class's own units),
     ``None`` for the exact law.  A substrate-damped homogeneous chain keeps the homogeneous
     contacts (only ``sub_damping`` is read)."""
-    from ...contact import ContactTable
+    from ...model.contact import ContactTable
 
     mix = model.mixture
     if mix is None:
@@ -330,7 +330,7 @@ def named_params(p):
 
 @njit(cache=True)
 def spline_force(table, d):
-    """``ContactTable.force`` for one value: the spline of :mod:`mdgran.contact_scalar`."""
+    """``ContactTable.force`` for one value: the spline of :mod:`mdgran.model.contact_scalar`."""
     i, x = spline_locate(d, table.base, table.scale, table.top, table.h)
     c = table.coef
     return spline_cubic(c[i, 0], c[i, 1], c[i, 2], c[i, 3], x)
@@ -339,7 +339,7 @@ def spline_force(table, d):
 @njit(cache=True)
 def exact_force(hertz, law, d):
     """``ContactLaw.force``: ``delta_+^(3/2)`` (Hertz) or ``fc + (t^3 - 3 sigma)^2``
-    (:mod:`mdgran.contact_scalar`'s scalar laws; ``law``: :class:`SchwarzConstants`)."""
+    (:mod:`mdgran.model.contact_scalar`'s scalar laws; ``law``: :class:`SchwarzConstants`)."""
     if hertz:
         return hertz_force(d)
     return schwarz_force_libm(d, law.fc, law.sigma, law.t_min, law.delta_min, law.energy_zero)

@@ -155,9 +155,9 @@ def load_commands(path=None) -> list[str]:
 
 
 def write_spline(table, path):
-    """The force spline of a :class:`mdgran.contact.ContactTable` for ``fix mdgran/chain table``:
-    its locating constants and the ``(n - 1) x 4`` coefficients, each as ``repr`` (17 digits at
-    most, read back exactly), so the fix evaluates the very numbers the hook does."""
+    """The force spline of a :class:`mdgran.model.contact.ContactTable` for ``fix mdgran/chain
+    table``: its locating constants and the ``(n - 1) x 4`` coefficients, each as ``repr`` (17
+    digits at most, read back exactly), so the fix evaluates the very numbers the hook does."""
     with open(path, "w") as fh:
         fh.write(f"# mdgran contact spline: {table.law}\nMDGRAN_SPLINE_W\nn {table.n}\n"
                  f"base {float(table.base)!r}\nscale {float(table._scale)!r}\n"
@@ -172,7 +172,7 @@ def write_mixture(model, folder, points=None) -> Path:
     substrate factor ``g`` and the scales ``A``, ``1/L``, ``L``, threshold ``L delta_off`` and
     law class of the contact to its right (:class:`mdgran.backends.lammps.hook.HookMix`, the
     very numbers the hook uses); each class's ``fc``.  Numbers as ``repr`` (exact)."""
-    from ...contact import ContactTable
+    from ...model.contact import ContactTable
     from .hook import mix_parameters
 
     folder = Path(folder)
@@ -197,7 +197,7 @@ def write_mixture(model, folder, points=None) -> Path:
 
 
 def write_base(base, path) -> Path:
-    """A base motion (:class:`mdgran.drive.BaseMotion`) for ``fix mdgran/chain base``: its
+    """A base motion (:class:`mdgran.model.drive.BaseMotion`) for ``fix mdgran/chain base``: its
     interval and its rows of cubic coefficients (highest power first), each as ``repr``
     (exact), so the fix evaluates the very numbers the hook does."""
     path = Path(path)

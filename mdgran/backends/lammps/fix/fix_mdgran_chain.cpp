@@ -11,7 +11,7 @@
 // and neither the front nor an event needs a collective call (LAMMPS's own part of a step,
 // neighbour checks, communication, the force array, stays O(N)); second order in dt through
 // snap events (sections "located events", "the activity front" and "event windows" below).  Units: mdgran's nondimensional ones through LAMMPS "lj"
-// units (mdgran/units.py): bead mass 1, length p, force eta = pi R w,
+// units (mdgran/model/units.py): bead mass 1, length p, force eta = pi R w,
 // time 1/q, energy eta p.
 //
 //   fix ID all mdgran/chain keyword value ...
@@ -36,7 +36,7 @@
 //     sub_damping C (substrate damping: force -g C w on each bead, w the velocity estimate of
 //            the contact damping; its power is added to D_viscous; default 0)
 //     pulse TAG A T t0 (four values: a half-sine force A sin(pi (t - t0) / T) on the atom with
-//            tag TAG for t0 <= t <= t0 + T; mdgran/drive.py; default: none)
+//            tag TAG for t0 <= t <= t0 + T; mdgran/model/drive.py; default: none)
 //     base FILE (a base motion u_b(t) under the substrate, mdgran.backends.lammps.plugin.write_base:
 //            its piecewise cubics on a uniform grid; the substrate then acts on u - u_b and
 //            w - u_b', the walls stay at 0; default: none)
@@ -54,13 +54,13 @@
 // sorting and migration do not matter); compression delta_k = u_k - u_(k+1) - gap with
 // u = x - x0 the displacement from the atom's initial x (walls: u = 0, v = 0).
 //
-// Law (docs/physics.md section 2; mdgran/contact.py), with t = sqrt(a) on the attached branch
+// Law (docs/physics.md section 2; mdgran/model/contact.py), with t = sqrt(a) on the attached branch
 // t >= t_min = sigma^(1/3), s = (fc + 2)/3, sigma = sqrt(s):
 //     delta(t) = t^4 - 4 sigma t,   f(t) = fc + (t^3 - 3 sigma)^2        (Schwarz; JKR fc = -1.5,
 //     V(delta) = P(t) - P(t0),      P' = f delta',  t0 = (4 sigma)^(1/3)  DMT fc = -2)
 //     f = delta_+^(3/2),  V = (2/5) delta_+^(5/2)                          (Hertz)
 // t(delta) by Newton on sqrt(delta - delta_min) (contact.py t_of_delta), or, with "table", the
-// not-a-knot cubic spline in w = sqrt(delta - delta_min) written by mdgran.contact.ContactTable.
+// not-a-knot cubic spline in w = sqrt(delta - delta_min) written by mdgran.model.contact.ContactTable.
 // fc from lambda: alpha = (1 - exp(-lambda/0.924))/1.02, fc = -6/(alpha^2 + 3).
 //
 // Per step, events quantized (post_force; hysteresis step-quantized as in the hook):
@@ -121,7 +121,7 @@
 using namespace LAMMPS_NS;
 using namespace FixConst;
 
-// the law's numerical constants, one table with mdgran/contact_scalar.py (law_constants.h)
+// the law's numerical constants, one table with mdgran/model/contact_scalar.py (law_constants.h)
 using mdgran_law::NEWTON_STEPS;
 using mdgran_law::SING_BAND;
 using mdgran_law::GL_X;
@@ -356,7 +356,7 @@ void FixMdgranChain::init()
 
 // ---- the law ------------------------------------------------------------------------------
 
-// The law's constants, evaluated as mdgran/contact.py does (same libm calls).
+// The law's constants, evaluated as mdgran/model/contact.py does (same libm calls).
 void MdgranLaw::set(int hertz_law, double fc_law, int snap_force)
 {
   hertz = hertz_law;
@@ -438,7 +438,7 @@ double MdgranLaw::law_energy(double d) const
   return antiderivative(t_of_delta(d)) - p_t0;
 }
 
-// The spline table of mdgran.contact.ContactTable.write_spline: keyword lines, then the
+// The spline table of mdgran.model.contact.ContactTable.write_spline: keyword lines, then the
 // (n - 1) x 4 coefficients of the force, every number with 17 digits (exact round trip).
 std::string MdgranLaw::read_table(const char *file)
 {

@@ -12,7 +12,7 @@
 
 namespace LAMMPS_NS {
 
-// One contact law in its own units (mdgran/contact.py's ContactLaw and ContactTable): the
+// One contact law in its own units (mdgran/model/contact.py's ContactLaw and ContactTable): the
 // chain's law, and with "mixture" the law of each class of unlike pairs.
 struct MdgranLaw {
   int hertz = 0;                            // 1: f = delta_+^(3/2); 0: Schwarz
@@ -21,7 +21,7 @@ struct MdgranLaw {
   double p_t0 = 0.0;                        // P(t0): V(delta) = P(t(delta)) - P(t0)
   int strict = 0;                           // delta_off == 0: strict inequalities
   double sing = -INFINITY;                  // located: mean-force kick below this delta
-  // spline table in w = sqrt(delta - base) (mdgran.contact.ContactTable), optional
+  // spline table in w = sqrt(delta - base) (mdgran.model.contact.ContactTable), optional
   int use_table = 0, tab_n = 0;
   double tab_base = 0.0, tab_scale = 0.0, tab_h = 0.0, tab_delta_max = 0.0;
   std::vector<double> tab_coef;             // (n - 1) x 4, highest power first
@@ -113,7 +113,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double mixed_located(const Con &c, double d, double h, double &F, double &Fv) const;
   inline double off_of(tagint jt) const { return mixed ? m_delta_off[jt] : delta_off; }
 
-  // ---- excitations ("pulse TAG A T t0", "base FILE"; mdgran/drive.py) -----------------------
+  // ---- excitations ("pulse TAG A T t0", "base FILE"; mdgran/model/drive.py) -----------------------
   // a half-sine force A sin(pi (t - t0) / T) on the atom with tag pulse_tag (0: none) for
   // t0 <= t <= t0 + T; the base motion u_b(t) under the substrate, cubics base_coef[4 k ..]
   // (highest power first, in t - k base_step; the last row after the samples), the substrate

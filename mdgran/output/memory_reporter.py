@@ -1,5 +1,5 @@
 """The in-memory reporter: every block of a run kept, returned as a
-:class:`~mdgran.run_record.Run` (what ``mdgran.run`` gives back as ``result.trajectory``)."""
+:class:`~mdgran.output.run_record.Run` (what ``mdgran.run`` gives back as ``result.trajectory``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +9,7 @@ from .run_record import LEDGER_NAMES, Run
 
 class MemoryReporter:
     """Keeps every frame in memory; :meth:`record` returns them as a
-    :class:`~mdgran.run_record.Run`, with the contacts' states (``Run.closed``,
+    :class:`~mdgran.output.run_record.Run`, with the contacts' states (``Run.closed``,
     ``[frames, n_contacts]`` bool)."""
 
     def __init__(self):
@@ -26,8 +26,8 @@ class MemoryReporter:
         self.status = status
 
     def record(self, scene=None, backend="") -> Run:
-        """The frames so far as a :class:`~mdgran.run_record.Run` of ``scene`` (a
-        :class:`~mdgran.scene.Scene`) on ``backend``."""
+        """The frames so far as a :class:`~mdgran.output.run_record.Run` of ``scene`` (a
+        :class:`~mdgran.model.scene.Scene`) on ``backend``."""
         blocks = self.blocks
 
         def joined(name, dtype=float):

@@ -17,8 +17,8 @@ inverted to machine precision by Newton's method on ``phi(w) = sqrt(delta - delt
 above the root converges monotonically and quadratically even at the snap-off point, where
 ``t(delta)`` has a square-root singularity).  The arithmetic of each law (branch inversion,
 force, energy, stiffness, the table's spline) is written once, as scalar functions in
-:mod:`mdgran.contact_scalar`; the methods here lift them over arrays as numpy ufuncs
-(:func:`mdgran.contact_scalar.lifted`), with the C library's ``pow`` for the powers of ``t``
+:mod:`mdgran.model.contact_scalar`; the methods here lift them over arrays as numpy ufuncs
+(:func:`mdgran.model.contact_scalar.lifted`), with the C library's ``pow`` for the powers of ``t``
 (numpy's ``**`` would take SIMD code on AVX-512 machines and differ there in the last bit).
 
 The contact energy on the attached branch, ``V(delta) = integral_0^delta f d delta'``, is the
@@ -283,15 +283,15 @@ class ContactLaw:
 
         Below ``delta_min`` the value is clamped to ``t_min`` (the force then stays at ``f_off``,
         a continuous extension used only inside an integration step that overshoots an event).
-        :func:`mdgran.contact_scalar.branch_t` applied elementwise.
+        :func:`mdgran.model.contact_scalar.branch_t` applied elementwise.
         """
         d = np.asarray(delta, dtype=float)
         return lifted(cs.branch_t)(d, self.sigma, self.t_min, self.delta_min)
 
     @property
     def constants(self) -> SchwarzConstants:
-        """The constants the scalar laws read (:func:`~mdgran.contact_scalar.schwarz_constants`;
-        zeros for Hertz)."""
+        """The constants the scalar laws read
+        (:func:`~mdgran.model.contact_scalar.schwarz_constants`; zeros for Hertz)."""
         return schwarz_constants(self)
 
     def force(self, delta):
@@ -430,7 +430,7 @@ class ContactTable:
         return out.reshape(d.shape)[()]
 
     def force(self, delta):
-        """The force spline at ``delta`` (:func:`mdgran.contact_scalar.spline_values`)."""
+        """The force spline at ``delta`` (:func:`mdgran.model.contact_scalar.spline_values`)."""
         return self._spline(self.f_coef, delta)
 
     def energy(self, delta):

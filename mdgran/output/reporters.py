@@ -6,11 +6,12 @@ The driver (:func:`mdgran.simulation.run`) hands every block of frames to each r
 (the ledger error is above the backend's declared bound), ``"failed: ..."``, or
 ``"interrupted"``).  This module gathers the package's reporters:
 
-* :class:`~mdgran.h5md_writer.H5MDWriter` writes the contract's H5MD file atomically (its
-  layout: :mod:`mdgran.h5md_layout`; the checkpoints it stores: :mod:`mdgran.checkpoint`).
-* :class:`~mdgran.memory_reporter.MemoryReporter` collects a
-  :class:`~mdgran.run_record.Run` (with the contacts' states per frame).
-* :class:`~mdgran.progress.ProgressReporter` draws a labelled progress bar on stderr.
+* :class:`~mdgran.output.h5md_writer.H5MDWriter` writes the contract's H5MD file atomically (its
+  layout: :mod:`mdgran.output.h5md_layout`; the checkpoints it stores:
+  :mod:`mdgran.output.checkpoint`).
+* :class:`~mdgran.output.memory_reporter.MemoryReporter` collects a
+  :class:`~mdgran.output.run_record.Run` (with the contacts' states per frame).
+* :class:`~mdgran.output.progress.ProgressReporter` draws a labelled progress bar on stderr.
 """
 from __future__ import annotations
 

@@ -22,8 +22,9 @@ nondimensional ``beads.mass`` sets ``beads.density``.
 ``E`` (Pa) or ``K`` (Pa), ``nu``, ``w`` (J/m^2), ``density`` (kg/m^3); only ``modulus``
 ("table", default, or "text") and ``D0`` (m, default 0.165e-9, the paper's) have defaults.
 It then sets ``contact.lambda`` too (its Maugis parameter,
-:attr:`mdgran.units.Scales.maugis_lambda`), unless the scene gives ``contact.lambda`` or ``contact.fc`` itself.  Where each
-value came from is in :attr:`Scene.sources` (and ``lambda_source`` in ``mdgran info``).
+:attr:`mdgran.model.units.Scales.maugis_lambda`), unless the scene gives ``contact.lambda`` or
+``contact.fc`` itself.  Where each value came from is in :attr:`Scene.sources` (and
+``lambda_source`` in ``mdgran info``).
 
 **Limits** (:data:`LIMITS`).  Besides being finite, a few values have ranges outside which the
 backends cannot work or the numbers are not representable; they are checked on the
@@ -71,7 +72,7 @@ from .contact import FC_RULES, LAWS, SNAP_OFF_RULES, ContactLaw, law_from_contac
 from .scene_records import record_types, section_records
 from .units import D0_DEFAULT, missing_material_keys, scales_from_material
 
-SCENE_DIR = Path(__file__).parent / "scenes"
+SCENE_DIR = Path(__file__).parents[1] / "scenes"
 
 
 class SceneError(ValueError):
@@ -121,9 +122,9 @@ _FREQ = "(stiffer, the substrate period falls below 6e-3 time units)"
 #: ratios to the reference bead (diameter, density, modulus, adhesion): within 1e3 either way,
 #: so that masses (diameter^3) and the pairs' force and length units stay within 1e9
 _RATIO = "[1e-3, 1e3]"
-#: beads.pattern values (mdgran.mixture.pattern_diameters)
+#: beads.pattern values (mdgran.model.mixture.pattern_diameters)
 PATTERNS = ("uniform", "dimer", "tapered", "intruder", "random")
-#: base.kind values (mdgran.drive)
+#: base.kind values (mdgran.model.drive)
 BASE_KINDS = ("none", "displacement", "acceleration")
 _MAT = "required in a [material]"
 _SI_LIST = "a number or a list of chain.n numbers"
@@ -345,7 +346,7 @@ SCHEMA = {
 }
 
 #: section -> its frozen record type (``scene.run`` is a ``RunSection``), generated from
-#: :data:`SCHEMA` (:mod:`mdgran.scene_records`)
+#: :data:`SCHEMA` (:mod:`mdgran.model.scene_records`)
 SECTION_TYPES = record_types(SCHEMA, __name__)
 globals().update({cls.__name__: cls for cls in SECTION_TYPES.values()})  # records pickle
 
@@ -490,7 +491,7 @@ class Scene:
     the SI key it was converted from (``"substrate.k1_si"``); ``None`` for a key the scene does
     not use.  Both are ``None`` for a Scene made directly from resolved data.
 
-    Each section is also a frozen record (:data:`SECTION_TYPES`, :mod:`mdgran.scene_records`),
+    Each section is also a frozen record (:data:`SECTION_TYPES`, :mod:`mdgran.model.scene_records`),
     an attribute named as the section: ``scene.run.dt``, ``scene.chain.n``,
     ``scene.impulse.velocity``.  The records are built from ``data`` when the Scene is made (a
     later change to ``data`` reaches them through :meth:`own_copy`, as it reaches a run)."""
@@ -531,7 +532,7 @@ class Scene:
 
     @cached_property
     def mixture(self):
-        """The chain's unlike beads (:class:`mdgran.mixture.Mixture`, from ``[beads]`` and
+        """The chain's unlike beads (:class:`mdgran.model.mixture.Mixture`, from ``[beads]`` and
         ``[striker]``), or ``None`` for the homogeneous chain."""
         from .mixture import mixture_from_scene
 
@@ -548,7 +549,7 @@ class Scene:
 
     @cached_property
     def drive(self):
-        """The scene's force pulse and base motion (:class:`mdgran.drive.Drive`), or None."""
+        """The scene's force pulse and base motion (:class:`mdgran.model.drive.Drive`), or None."""
         from .drive import drive_from_scene
 
         return drive_from_scene(self)
@@ -556,7 +557,7 @@ class Scene:
     @property
     def energy_scale(self) -> float:
         """The energy ledger errors are measured in (units eta p): :attr:`impulse_energy`
-        plus the excitations' (:meth:`mdgran.drive.Drive.energy`); the impulse energy alone
+        plus the excitations' (:meth:`mdgran.model.drive.Drive.energy`); the impulse energy alone
         for a scene without them."""
         if self.drive is None:
             return self.impulse_energy
@@ -974,7 +975,7 @@ BEAD_WAYS = {"E": "modulus", "nu": "modulus", "w": "adhesion", "density_si": "de
 
 def _derive_beads(data: dict, raw: dict, scales, sources: dict):
     """``beads.E``/``nu``, ``w``, ``density_si`` (SI, need a [material]) and ``mass`` become
-    the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`mdgran.mixture.
+    the ratios ``beads.modulus``, ``adhesion``, ``density`` (:func:`mdgran.model.mixture.
     modulus_ratios`, ``ratios_to``, ``density_from_mass``); the resolved scene holds the ratios
     only, as for the other SI keys.  A striker keeps its own ``striker.density``."""
     b, n = data["beads"], data["chain"]["n"]
@@ -1170,7 +1171,7 @@ def key_reference() -> str:
     lines = [
         "# Scene keys",
         "",
-        "<!-- Generated by `python reference/make_scene_keys.py` from `mdgran.scene.SCHEMA`",
+        "<!-- Generated by `python reference/make_scene_keys.py` from `mdgran.model.scene.SCHEMA`",
         "     and `LIMITS`; do not edit by hand (tests/test_material.py fails when this file",
         "     differs from what the script writes). -->",
         "",
@@ -1182,7 +1183,8 @@ def key_reference() -> str:
         "[the physics, section 1](physics.md#1-scales-and-units): force",
         "`eta = pi R w`, length `p`, time `1/q = sqrt(m p / eta)`, velocity `p q`, bead mass 1;",
         "\"-\" is a pure number. Values must also be finite; \"range\" is what the checks in",
-        "`mdgran/scene.py` allow (an SI key's converted value must fit its plain key's range).",
+        "`mdgran/model/scene.py` allow (an SI key's converted value must fit its plain key's",
+        "range).",
         "",
     ]
     for sec, keys in SCHEMA.items():

@@ -169,9 +169,9 @@ TMP_SUFFIX = len(".tmp-") + 10
 
 
 def _refuse(key: str, message: str):
-    """Bad input naming the parameter ``key``: :class:`~mdgran.scene.SceneError` (exit status 2
-    on the command line, which names the flag instead)."""
-    from .scene import SceneError
+    """Bad input naming the parameter ``key``: :class:`~mdgran.model.scene.SceneError` (exit status
+    2 on the command line, which names the flag instead)."""
+    from ..model.scene import SceneError
 
     return SceneError(key, message)
 

@@ -38,7 +38,7 @@ def si_matched_velocity(micro_scene, macro_scene) -> float:
 
 def control_scenes(duration: float | None = None) -> dict:
     """The four scenes of the controls (``duration`` shortens every run: tests)."""
-    from .scene import load_scene
+    from ..model.scene import load_scene
 
     extra = [("run.duration", float(duration))] if duration is not None else []
     micro = load_scene("micro-star", extra)
@@ -86,7 +86,7 @@ def compare_decay(micro, macro, step: float = 0.05) -> dict:
     """Micro against macro: both ``T_c``-windowed kinetic energies on a common grid of
     ``time / T_c`` (each chain's own ``T_c``), and :func:`ratio_windows` of them.  ``micro``
     and ``macro`` are trajectories."""
-    from .analysis import characteristic_period
+    from ..analysis import characteristic_period
 
     tc_a, tc_b = characteristic_period(micro), characteristic_period(macro)
     ka = windowed_kinetic(micro.time, micro.ledger["kinetic_energy"], tc_a)
@@ -100,9 +100,9 @@ def compare_decay(micro, macro, step: float = 0.05) -> dict:
 
 
 def cluster_activity(run) -> dict:
-    """How much a chain (a :class:`~mdgran.run_record.Run`) clusters: new clusters formed, and
-    the time of the last re-clustering event, in units of its own ``T_c``."""
-    from .analysis import reclustering_events
+    """How much a chain (a :class:`~mdgran.output.run_record.Run`) clusters: new clusters formed,
+    and the time of the last re-clustering event, in units of its own ``T_c``."""
+    from ..analysis import reclustering_events
 
     tc = run.measures.characteristic_period
     times, new = reclustering_events(run.measures.history)
@@ -134,8 +134,8 @@ def run_controls(runs_dir, backend: str = "reference", duration: float | None = 
     e.g. the report's flagship runs of micro-star and macro-hertz)."""
     from pathlib import Path
 
-    from .simulation import BackendUnavailable, run
-    from .run_record import read_h5
+    from ..simulation import BackendUnavailable, run
+    from ..output.run_record import read_h5
 
     runs_dir = Path(runs_dir)
     scenes = control_scenes(duration)

@@ -7,14 +7,14 @@ What it does, reusing whatever ``DIR`` already holds (so a second call only redr
 2. runs the ``paper-robustness`` sweep into ``DIR/sweep/`` (or reads ``sweep_dir``), resumable,
    in parallel; ``small`` runs its CI-sized version;
 3. analyses them with :mod:`mdgran.analysis` and draws Figs. 2-7 and B1-B3
-   (:mod:`mdgran.paper_figures`) into ``DIR/figures/``;
+   (:mod:`mdgran.studies.paper_figures`) into ``DIR/figures/``;
 4. writes ``DIR/report.md`` (the figures with the numbers they show) and ``DIR/report.json``;
    its "Run status" section names every run and sweep case that is not complete (its ledger
    error exceeded its backend's declared bound, or it failed): their numbers are in the
    figures and tables but are not to be trusted.
 
-**Realizations.**  A sweep run with ``[sweep] realizations = K`` (:mod:`mdgran.sweep`) holds K
-realizations of each grid point.  The figures and sections pool them all; report.md's
+**Realizations.**  A sweep run with ``[sweep] realizations = K`` (:mod:`mdgran.studies.sweep`) holds
+K realizations of each grid point.  The figures and sections pool them all; report.md's
 "Realizations" section gives every statistic of the study (Fig. 7 slope after the impact
 transient, pooled coincidence fraction and its z at T_c / 4 in the active part, the z of each
 null model of :func:`null_models`, with smaller shuffle counts) computed on each realization
@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis as an
+from .. import analysis as an
 from . import paper_figures as pf
 from . import controls
-from .scene import load_scene
-from .storage import write_atomic
-from .run_record import read_h5
+from ..model.scene import load_scene
+from ..output.storage import write_atomic
+from ..output.run_record import read_h5
 
 FLAGSHIP = ("micro-star", "macro-hertz")
 #: beyond the paper: sweep name -> (axis shown as colour, its label, log colour scale)
@@ -44,7 +44,7 @@ BEYOND = {"chain-100": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False
           "chain-1000": ("substrate.k1_si", "substrate stiffness K1 (N/m)", False),
           "lambda-range": ("contact.lambda", "Maugis parameter lambda", True)}
 #: beyond the paper, studies that are no sweep: the primary pulse in long chains
-#: (mdgran.long_chain, on the fast backend)
+#: (mdgran.studies.long_chain, on the fast backend)
 BEYOND_STUDIES = ("long-chain",)
 
 
@@ -52,9 +52,9 @@ BEYOND_STUDIES = ("long-chain",)
 def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None,
                label: str | None = None):
     """The run ``out/NAME.h5`` (made if missing), as read back from the file (a
-    :class:`~mdgran.run_record.Run`, its scene the stored one); ``label``: its progress line's
-    label (default the scene and backend)."""
-    from .simulation import run
+    :class:`~mdgran.output.run_record.Run`, its scene the stored one); ``label``: its progress
+    line's label (default the scene and backend)."""
+    from ..simulation import run
 
     scene = load_scene(name, [] if duration is None else [("run.duration", float(duration))])
     path = out / f"{name}.h5"
@@ -62,7 +62,7 @@ def ensure_run(name: str, out: Path, backend: str, progress: bool, duration=None
         out.mkdir(parents=True, exist_ok=True)
         reporters = []
         if progress:
-            from .progress import ProgressReporter
+            from ..output.progress import ProgressReporter
 
             reporters.append(ProgressReporter(float(scene.run.duration),
                                               label=label or f"{name} [{backend}]"))
@@ -85,16 +85,16 @@ def _listed(indices: list) -> str:
 
 
 def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
-    """Refuse (:class:`~mdgran.scene.SceneError`, one line, exit status 2) a sweep folder that
+    """Refuse (:class:`~mdgran.model.scene.SceneError`, one line, exit status 2) a sweep folder that
     is unfinished (a case without its JSON) or whose finished cases lack their ``.h5`` (an
     older mdgran's MPI sweep wrote only the JSON on its worker ranks): their figures and tests
     would silently leave those cases out, or whose ``.h5`` cannot be read (cut short,
     overwritten: the report ran a minute, then a traceback).  Returns the cases that failed
     without writing an
     ``.h5`` (an exception, a worker that died), which the report names in its run status."""
-    from .scene import SceneError
+    from ..model.scene import SceneError
 
-    from .run_record import unreadable
+    from ..output.run_record import unreadable
 
     spec = json.loads((sweep_dir / "sweep.json").read_text())
     unrun, no_h5, failed, broken = [], [], [], []
@@ -133,9 +133,9 @@ def check_sweep_files(sweep_dir: Path, key: str = "--sweep-dir") -> list:
 
 def sweep_cases(sweep_dir: Path, key: str = "--sweep-dir") -> list:
     """Every finished case of a sweep folder: params, the scene stored in its run file, a lazy
-    loader of its :class:`~mdgran.run_record.Run` (``"run"``), and its measures
-    (:class:`~mdgran.measures.Measures`: the summary recomputed with the current analysis code,
-    the C_eff and rate curves, the channels, segments and null-model case).  A folder with
+    loader of its :class:`~mdgran.output.run_record.Run` (``"run"``), and its measures
+    (:class:`~mdgran.output.measures.Measures`: the summary recomputed with the current analysis
+    code, the C_eff and rate curves, the channels, segments and null-model case).  A folder with
     cases missing their files is refused (:func:`check_sweep_files`); a case that failed
     without an ``.h5`` is left out here (the report names it in its run status)."""
     check_sweep_files(sweep_dir, key)
@@ -343,7 +343,7 @@ def beyond_sweep(name, out, figs, workers, small, progress, backend) -> dict:
 
 
 def _long_chain(figure, small: bool, say) -> dict:
-    """:func:`mdgran.long_chain.long_chain_study` (smaller and shorter with ``small``), its
+    """:func:`mdgran.studies.long_chain.long_chain_study` (smaller and shorter with ``small``), its
     runs that are not complete listed as the sweeps' are (``not_complete``)."""
     from . import long_chain as lc
 
@@ -481,7 +481,7 @@ def null_models(cases: list, small: bool = False, shuffles: tuple | None = None)
     shift; the coincidence at T_c / 4 for C_eff from all dissipation, viscous only and
     hysteresis only.  ``shuffles``: ``(K, K_long)`` shuffle counts instead of the defaults
     (100, 1000 small; 300, 10000), as :func:`realization_statistics` uses per realization."""
-    from .analysis import nulls
+    from ..analysis import nulls
 
     nc = [c["null_case"] for c in cases]
     k, k_long = shuffles or ((100, 1000) if small else (300, 10000))
@@ -610,7 +610,7 @@ def realization_groups(cases: list) -> dict:
 
 def late_fig7_fit(cases: list) -> dict:
     """Fig. 7 after the impact transient without drawing it: the fit of
-    :func:`mdgran.paper_figures.fit_slope` on each case's representative segment starting at
+    :func:`mdgran.studies.paper_figures.fit_slope` on each case's representative segment starting at
     ``t >= T_c / 2`` (what ``numbers["fig7"]`` holds)."""
     rows = [c for c in cases if c.get("c_eff_late_segment") is not None
             and (c.get("c_eff_late_segment_rate") or 0) > 0]
@@ -686,7 +686,7 @@ def realizations_markdown(rz: dict) -> list:
         return L + ["One realization per grid point: every statistic above is that of one "
                     "realization of a chaotic system, with no interval over realizations. "
                     "(`realizations = K` in the sweep's `[sweep]` table runs K, each with the "
-                    "impulse velocity perturbed: `mdgran/sweep.py`.)", ""]
+                    "impulse velocity perturbed: `mdgran/studies/sweep.py`.)", ""]
     eps = rz.get("perturbation")
     L += [f"{rz['K']} realizations of each grid point"
           + (f", realization r with the impulse velocity v0 (1 + r x {eps:g})" if eps else "")
@@ -739,8 +739,8 @@ def paper_details() -> dict:
     """Two details of the paper the report states: (1) Table II's stress column is T_s over a
     circle of the wire's *length* as diameter, T_s / (pi L_s^2 / 4), not T_s / A_s with
     A_s = pi d_s^2 / 4; (2) the COS relation the paper uses for fc against the exact
-    Maugis-Dugdale pull-off (:func:`mdgran.contact.maugis_dugdale_pulloff`)."""
-    from .contact import fc_from_lambda, maugis_dugdale_pulloff
+    Maugis-Dugdale pull-off (:func:`mdgran.model.contact.maugis_dugdale_pulloff`)."""
+    from ..model.contact import fc_from_lambda, maugis_dugdale_pulloff
 
     wires = [{"d": r["d"], "printed_MPa": r["sigma_y"] / 1e6,
               "T_s_over_pi_L_s2_4_MPa": r["T_s"] / (math.pi * r["L_s"] ** 2 / 4) / 1e6,
@@ -776,7 +776,8 @@ def paper_details_markdown(pd: dict) -> list:
 
 
 def controls_markdown(ctl: dict) -> list:
-    """report.md's section on the controls of the macro/micro comparison (mdgran.controls)."""
+    """report.md's section on the controls of the macro/micro comparison
+    (mdgran.studies.controls)."""
     L = ["## What survives: the controls of the macro/micro comparison", "",
          "The paper matches its macro chain to the micro chain by equal primary-pulse speed in "
          "nondimensional units. Two controls: the macro chain struck at the micro chain's "
@@ -927,7 +928,7 @@ def _sweep_markdown(nb: dict, cases: list) -> list:
 
 
 def _fig7_line(label: str, f: dict) -> str:
-    """One Fig. 7 fit ``f`` (:func:`mdgran.paper_figures.fit_slope` with its
+    """One Fig. 7 fit ``f`` (:func:`mdgran.studies.paper_figures.fit_slope` with its
     correlations) as a bullet, or why there is none."""
     if "slope" not in f:
         return f"* {label}: too few cases for a fit (n = {f['n']})."

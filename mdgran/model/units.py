@@ -143,7 +143,7 @@ def scales_from_material(mat: dict, fill: dict | None = ALUMINA) -> Scales:
     Keys the table lacks are taken from ``fill``, by default the paper's alumina
     (:data:`ALUMINA`), a convenience for Python use (``scales_from_material({"diameter":
     2.5e-6})`` is the paper's micro bead).  Scenes do not use it: a scene's ``[material]``
-    must be complete (:func:`mdgran.scene.resolve` says which keys are missing), and it is
+    must be complete (:func:`mdgran.model.scene.resolve` says which keys are missing), and it is
     converted with ``fill=None``, which raises ``ValueError`` naming the missing keys.
     """
     if fill is None:

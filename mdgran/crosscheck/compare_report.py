@@ -1,4 +1,5 @@
-"""Writing a comparison: ``report.json``, ``report.md`` and PNG figures (see mdgran.compare)."""
+"""Writing a comparison: ``report.json``, ``report.md`` and PNG figures (see
+mdgran.crosscheck.compare)."""
 from __future__ import annotations
 
 import json
@@ -6,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .storage import write_atomic
+from ..output.storage import write_atomic
 
 
 def _adhesive(scene) -> bool:
@@ -249,8 +250,8 @@ def write_report(out: Path, scene, runs, pred, report, pairs):
 
 
 def write_failure(out: Path, scene, report):
-    """The report of a comparison a backend's run failed in (:func:`mdgran.compare.compare`):
-    which backend, why, and the runs done before it."""
+    """The report of a comparison a backend's run failed in
+    (:func:`mdgran.crosscheck.compare.compare`): which backend, why, and the runs done before it."""
     f = report["failed"]
     lines = [f"# Comparison of {scene.name}: FAIL", "",
              f"The run on **{f['backend']}** failed: {f['error']}", "",

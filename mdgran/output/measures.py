@@ -1,8 +1,8 @@
 """A run's measures, each computed once (MDAnalysis's results container, for one run).
 
-``run.measures`` (a :class:`Measures` of a :class:`~mdgran.run_record.Run`) computes the paper's
-measures of the run on first use, at the default settings of :mod:`mdgran.analysis`, and keeps
-them: ``C_eff / C_+`` (Eq. 9), the re-clustering analysis of Appendix A (clusters, segments,
+``run.measures`` (a :class:`Measures` of a :class:`~mdgran.output.run_record.Run`) computes the
+paper's measures of the run on first use, at the default settings of :mod:`mdgran.analysis`, and
+keeps them: ``C_eff / C_+`` (Eq. 9), the re-clustering analysis of Appendix A (clusters, segments,
 smoothed rate), the coincidence test of their peaks, the dissipation channels, the case of the
 null models and the sweep's scalar summary.  Each is computed from the ones before it, so a
 report that asks for all of them computes ``C_eff`` and the clusters once per run.  Other
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from functools import cached_property
 
-from . import analysis as an
+from .. import analysis as an
 
 
 class Measures:

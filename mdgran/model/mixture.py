@@ -114,7 +114,7 @@ class Mixture:
     @cached_property
     def _constants(self):
         """Per-contact ``(fc, sigma, t_min, delta_min, P(t0))`` arrays (own units): each
-        class's :func:`~mdgran.contact_scalar.schwarz_constants` (zeros for Hertz; a one-class
+        class's :func:`~mdgran.model.contact_scalar.schwarz_constants` (zeros for Hertz; a one-class
         mixture has the homogeneous law's values)."""
         cols = [tuple(schwarz_constants(law)) for law in self.laws]
         table = np.array(cols, dtype=float)[self.law_index]
@@ -139,7 +139,7 @@ class Mixture:
 
     def _law(self, quantity, delta, k):
         """``(A, L, value)``: the scales of all contacts (or of ``k``) and their own law's
-        ``quantity`` at ``delta / L`` (:func:`~mdgran.contact_scalar.numpy_law`)."""
+        ``quantity`` at ``delta / L`` (:func:`~mdgran.model.contact_scalar.numpy_law`)."""
         A, L = self._scales(k)
         u = np.asarray(delta, dtype=float) / L
         with np.errstate(divide="ignore"):
@@ -223,8 +223,8 @@ def _each(f, *values):
 def modulus_ratios(E, nu, K0: float, convention: str = "table"):
     """Contact-modulus ratios ``k_i = K_ii / K0`` of beads of Young's modulus ``E`` (Pa) and
     Poisson's ratio ``nu`` (each a number or a list of n), ``K_ii`` the ``K`` of two beads of
-    bead ``i``'s material by ``convention`` (:func:`mdgran.units.contact_modulus`), ``K0`` (Pa)
-    the reference pair's.
+    bead ``i``'s material by ``convention`` (:func:`mdgran.model.units.contact_modulus`), ``K0``
+    (Pa) the reference pair's.
 
     Both conventions are ``K = c E*`` with the Hertz effective modulus of the pair,
     ``1/E* = (1 - nu_i^2)/E_i + (1 - nu_j^2)/E_j`` (``c = 1`` "table", ``4/3`` "text"), so

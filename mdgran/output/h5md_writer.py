@@ -1,6 +1,6 @@
 """The H5MD writer: a reporter that writes the contract's H5MD file (``docs/output.md``)
-atomically, and only writes: the file's layout is :mod:`mdgran.h5md_layout`, the
-checkpoints' reading and verifying :mod:`mdgran.checkpoint`, what is written and when the
+atomically, and only writes: the file's layout is :mod:`mdgran.output.h5md_layout`, the
+checkpoints' reading and verifying :mod:`mdgran.output.checkpoint`, what is written and when the
 driver's (:func:`mdgran.simulation.run`).
 """
 from __future__ import annotations
@@ -14,9 +14,9 @@ import numpy as np
 from . import checkpoint
 from . import h5md_layout as layout
 from .h5md_append import append_events, append_rows
-from .chain import touching_contacts
+from ..model.chain import touching_contacts
 from .h5md_layout import CONTACT_SERIES, COMPRESSION, H5_LIBVER
-from .rest_blocks import gather_rows
+from ..rest_blocks import gather_rows
 from .run_environment import mpi_ranks_of, mpi_world_size
 from .run_record import ledger_terms
 from .storage import OutputLock, StorageError, abandon, reason, temporary_path
@@ -31,20 +31,20 @@ class H5MDWriter:
     resume from.  ``output.bead_stride`` stores every k-th bead (and contact) only, or none;
     ``output.compression`` compresses those series.
 
-    The writer holds ``NAME.lock`` (:class:`~mdgran.storage.OutputLock`) from its start to
+    The writer holds ``NAME.lock`` (:class:`~mdgran.output.storage.OutputLock`) from its start to
     its close, so a second run on the same name is refused.  A write the file system refuses
-    (full disk, quota) raises :class:`~mdgran.storage.StorageError` after the temporary is
+    (full disk, quota) raises :class:`~mdgran.output.storage.StorageError` after the temporary is
     removed; the requested name is never touched.
 
     Every contact's state per frame is stored (``/observables/contacts/closed``, from each
     frame's ``closed``); ``contacts`` (default: the scene's ``output.contacts``) adds the
     per-contact time series ``/observables/contacts/{compression,force}``
-    (:data:`~mdgran.h5md_layout.CONTACT_SERIES`), as each block holds them (the driver
+    (:data:`~mdgran.output.h5md_layout.CONTACT_SERIES`), as each block holds them (the driver
     computes them once per block: :meth:`~mdgran.backends.base.Frames.contact_series`).  The
     writer computes nothing: the chain's numbering comes from ``model`` (the backend's
-    :class:`~mdgran.chain.ChainModel`), the checkpoints from the driver (:meth:`checkpoint`).
+    :class:`~mdgran.model.chain.ChainModel`), the checkpoints from the driver (:meth:`checkpoint`).
     ``/parameters`` attribute ``mpi_ranks`` records the number of MPI ranks the run was
-    split over (:func:`~mdgran.run_environment.mpi_ranks_of` of ``backend``)."""
+    split over (:func:`~mdgran.output.run_environment.mpi_ranks_of` of ``backend``)."""
 
     mpi_world_size = staticmethod(mpi_world_size)
     mpi_ranks_of = staticmethod(mpi_ranks_of)
@@ -54,13 +54,13 @@ class H5MDWriter:
                  resume: bool = False, contacts: bool | None = None, backend=None, *, model):
         """``checkpoint_every`` (seconds of wall time, or None) makes the run resumable: the
         file is filled under the fixed name ``NAME.h5.partial``, where :meth:`checkpoint`
-        stores the backend's state at the last written frame (:mod:`mdgran.checkpoint`), and
+        stores the backend's state at the last written frame (:mod:`mdgran.output.checkpoint`), and
         which an interrupted or killed run leaves behind; ``resume=True`` verifies it
-        (:func:`~mdgran.checkpoint.resume`: backend, scene, checksums), drops the frames
+        (:func:`~mdgran.output.checkpoint.resume`: backend, scene, checksums), drops the frames
         written after it, and gives what the run goes on from as ``resumed``
-        (:class:`~mdgran.checkpoint.Resumed`).  Without ``resume``, an existing
+        (:class:`~mdgran.output.checkpoint.Resumed`).  Without ``resume``, an existing
         ``NAME.h5.partial`` is refused rather than overwritten
-        (:class:`~mdgran.checkpoint.CheckpointError`)."""
+        (:class:`~mdgran.output.checkpoint.CheckpointError`)."""
         import h5py
 
         self.path = Path(path)
@@ -138,7 +138,7 @@ class H5MDWriter:
 
     def frame_bytes(self) -> int:
         """Bytes of per-bead and per-contact values one frame adds to the buffer
-        (:func:`~mdgran.h5md_layout.frame_bytes`)."""
+        (:func:`~mdgran.output.h5md_layout.frame_bytes`)."""
         return layout.frame_bytes(len(self.bead_ids),
                                   len(range(*self._cols.indices(self.model.n_contacts))),
                                   self.positions, self.contacts)
@@ -202,7 +202,7 @@ class H5MDWriter:
         self.f.flush()
 
     def _moved_columns(self):
-        """:func:`~mdgran.h5md_layout.moved_columns` of the buffered blocks."""
+        """:func:`~mdgran.output.h5md_layout.moved_columns` of the buffered blocks."""
         m = self.model
         return layout.moved_columns([b[6] for b in self._buf],
                                     lambda lo, hi: touching_contacts(m.n, m.walls, lo, hi),

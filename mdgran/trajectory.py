@@ -1,9 +1,0 @@
-"""Former name of :mod:`mdgran.run_record`: ``Trajectory`` is :class:`~mdgran.run_record.Run`.
-
-Kept so that code written against mdgran 0.1 (``from mdgran.trajectory import Trajectory,
-read_h5``) keeps working; new code imports from :mod:`mdgran.run_record`.
-"""
-from .run_record import LEDGER_NAMES, Run, read_h5  # noqa: F401
-
-#: former name of :class:`~mdgran.run_record.Run`
-Trajectory = Run
