@@ -1,6 +1,6 @@
 """Hot loop of the fast backend: velocity Verlet on plain numpy arrays, compiled with numba.
 
-Units and equations are those of :mod:`mdgran.chain` (bead mass 1, nondimensional)::
+Units and equations are those of :mod:`mdgran.model.chain` (bead mass 1, nondimensional)::
 
     x_i'' = a_i = F_i - F_(i+1) - k1 x_i - k3 x_i^3,
     F_k   = closed_k * (f(delta_k) + c * d delta_k/dt),   delta_k = x_left - x_right - gap
@@ -52,13 +52,13 @@ closed contact with ``delta <= delta_off`` opens and an open one with ``delta >=
 (strict inequalities when ``delta_off = 0``), before the force at the new positions is
 computed; the event time is interpolated linearly in the step (as the LAMMPS backend does).
 
-**Force** ``f(delta)``: the table of :class:`mdgran.contact.ContactTable`, nodes uniform in
+**Force** ``f(delta)``: the table of :class:`mdgran.model.contact.ContactTable`, nodes uniform in
 ``w = sqrt(delta - base)`` (``base = delta_min``, 0 for Hertz) with a cubic spline in ``w``
 between them (:class:`ForceTable`), or the exact law (``exact = True``: Newton inversion,
 slower).  Hertz always uses the exact ``delta^(3/2)`` (cheaper than the table, and free of
 the spline's round-off force near ``delta = 0``, which made resting contacts ahead of the
 pulse flicker).  Energies at events use the exact law.  The exact law is the scalar one of
-:mod:`mdgran.contact_scalar`.
+:mod:`mdgran.model.contact_scalar`.
 
 Terms switched off (walls, damping, k1, k3, event location, exact law) are compile-time
 constants of :func:`get_kernel` (:class:`Flags`, passed down as literal booleans): each
@@ -79,7 +79,7 @@ lanes after the pass, on the threads too when a step has many (:func:`local_even
 
 **Records** (numba named tuples and one structured record, so that each function takes a
 few arguments that say what they are): :class:`Flags` (the variant), :class:`Params` (the
-run's constants, with the law's :class:`~mdgran.contact_scalar.SchwarzConstants` and the
+run's constants, with the law's :class:`~mdgran.model.contact_scalar.SchwarzConstants` and the
 :class:`ForceTable`), :class:`Beads` (``x, v, a``), :class:`KernelState` (contact states,
 the :data:`COUNTERS` record, the :class:`EventLog`, scratch lists), all updated in place, and
 :class:`FrameBlock` (the states at the ends of the frames one call of the loop runs).
@@ -114,7 +114,7 @@ SIMULTANEOUS = 1e-12  # events within SIMULTANEOUS * (1 + t) of the earliest swi
 STATE_TOL = 1e-12
 FLAG_CAP = 64  # flagged contacts remembered per pass (beyond: all contacts are scanned)
 CHAT_CAP = 64
-#: Closed contacts with delta below delta_min + SING_BAND (mdgran.contact_scalar) get the
+#: Closed contacts with delta below delta_min + SING_BAND (mdgran.model.contact_scalar) get the
 #: mean-force kick (Schwarz, displacement rule); see `segment_pass`.
 #: Contacts per segment of a pass (:class:`Segments`): the unit the threads share.  It depends
 #: on nothing but this constant, so a run's result does not depend on the thread count; a
@@ -157,7 +157,7 @@ class Flags(NamedTuple):
 
 
 class ForceTable(NamedTuple):
-    """The force table of :class:`mdgran.contact.ContactTable`: the cubic of interval ``i``
+    """The force table of :class:`mdgran.model.contact.ContactTable`: the cubic of interval ``i``
     in ``w = sqrt(delta - base)`` has coefficients ``coef[4 i: 4 i + 4]`` (highest power
     first; one flat array, so that the index needs no stride from memory) in
     ``w - w_i``; ``w / step`` is the interval coordinate, ``scale = 1 / step``."""
@@ -170,7 +170,7 @@ class ForceTable(NamedTuple):
 
 
 class Mix(NamedTuple):
-    """A chain of unlike beads (:class:`mdgran.mixture.Mixture`; empty arrays otherwise).
+    """A chain of unlike beads (:class:`mdgran.model.mixture.Mixture`; empty arrays otherwise).
 
     Contact ``j`` is of kind ``kind[j]``: row ``k`` of ``pair`` (``pair[k * NPAIR + P_*]``, a
     flat array: its index needs no stride from memory) and a law class ``pair_class[k]``.  It
@@ -178,7 +178,7 @@ class Mix(NamedTuple):
     ``V = A L V(delta / L)``.  Each class has a force table (its cubics in ``coef``, from the
     row's ``P_FIRST`` on, as :class:`ForceTable`'s; its ``base``, ``scale``, ``step`` copied
     into each row of the class) and its Schwarz constants (a row of ``laws``,
-    :class:`~mdgran.contact_scalar.SchwarzConstants`' fields).  A row also holds the mass and
+    :class:`~mdgran.model.contact_scalar.SchwarzConstants`' fields).  A row also holds the mass and
     substrate factor of the contact's left bead, which the pass finishes at that contact, so
     that the pass reads one small array per contact (``kind``) and a few rows, which stay in
     cache, where per-contact arrays of every constant would be five streams from memory
@@ -215,7 +215,7 @@ def no_mix() -> Mix:
 
 
 class Drive(NamedTuple):
-    """The excitations of :mod:`mdgran.drive` (flags[PULSE], flags[BASE]): the half-sine pulse
+    """The excitations of :mod:`mdgran.model.drive` (flags[PULSE], flags[BASE]): the half-sine pulse
     ``amp sin(pi (t - start) / duration)`` on bead ``bead``; the base motion's cubics
     ``coef[k]`` (highest power first, in ``t - k step``; the last row after the samples)."""
 
@@ -233,7 +233,7 @@ def no_drive() -> Drive:
 
 
 def drive_record(drive) -> Drive:
-    """The kernel's :class:`Drive` of a :class:`mdgran.drive.Drive` (or None)."""
+    """The kernel's :class:`Drive` of a :class:`mdgran.model.drive.Drive` (or None)."""
     if drive is None:
         return no_drive()
     p, b = drive.pulse, drive.base
@@ -247,7 +247,7 @@ def drive_record(drive) -> Drive:
 
 
 class Params(NamedTuple):
-    """The constants of one run (units of :mod:`mdgran.chain`)."""
+    """The constants of one run (units of :mod:`mdgran.model.chain`)."""
 
     gap: float  # delta = x_left - x_right - gap
     damping: float  # c
@@ -420,7 +420,7 @@ COUNTERS = np.dtype([
     ("power", np.float64),  # damping power at the current state
     ("bad_time", np.float64),  # the time an error concerns
     ("chatter_time", np.float64),  # the instant KernelState.chatter counts switches at
-    ("work", np.float64),  # W, the excitations' work (mdgran.drive)
+    ("work", np.float64),  # W, the excitations' work (mdgran.model.drive)
     ("ext_power", np.float64),  # its rate at the current state
 ])
 
@@ -623,8 +623,8 @@ def memo_branch(memo, j, u, law):
 
 @njit(inline="always")
 def memo_mean_force(flags, params, j, d0, d1, memo, keep):
-    """Mean force of contact j over [d0, d1] (:func:`~mdgran.contact_scalar.schwarz_mean_force`,
-    scaled for unlike beads), its start's branch inversion (seven Newton steps) taken from
+    """Mean force of contact j over [d0, d1]
+    (:func:`~mdgran.model.contact_scalar.schwarz_mean_force`, scaled for unlike beads), its start's branch inversion (seven Newton steps) taken from
     ``memo`` when the last one of contact j was there (the same number): a kicked contact's end
     of one step is its start of the next.  Its end's goes into ``memo[j]`` if ``keep``.  A
     contact's memo is written by the one segment that owns it, or by the one event window
@@ -697,7 +697,7 @@ def quantized_switch(flags, params, j, d, doff, x_old, h, t0, closed):
 @njit(inline="always")
 def drive_at(flags, params, t):
     """``(u_b, u_b', F)`` at time t: the base's displacement and velocity, the pulse's force
-    (each 0 when the variant has none; :mod:`mdgran.drive`)."""
+    (each 0 when the variant has none; :mod:`mdgran.model.drive`)."""
     ub, vb, fp = 0.0, 0.0, 0.0
     d = params.drive
     if flags[PULSE]:
@@ -716,7 +716,7 @@ def drive_at(flags, params, t):
 @njit(cache=True)
 def external_power(flags, params, beads, t, lo, hi):
     """Rate of the excitations' work on beads lo .. hi at time t in state ``beads``: ``F(t)
-    v_b + u_b'(t) sum_i F_sub,i`` (:mod:`mdgran.drive`)."""
+    v_b + u_b'(t) sum_i F_sub,i`` (:mod:`mdgran.model.drive`)."""
     ub, vb, fp = drive_at(flags, params, t)
     p = 0.0
     if flags[PULSE] and lo <= params.drive.bead <= hi:
