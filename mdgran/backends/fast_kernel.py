@@ -624,9 +624,10 @@ def memo_branch(memo, j, u, law):
 @njit(inline="always")
 def memo_mean_force(flags, params, j, d0, d1, memo, keep):
     """Mean force of contact j over [d0, d1]
-    (:func:`~mdgran.model.contact_scalar.schwarz_mean_force`, scaled for unlike beads), its start's branch inversion (seven Newton steps) taken from
-    ``memo`` when the last one of contact j was there (the same number): a kicked contact's end
-    of one step is its start of the next.  Its end's goes into ``memo[j]`` if ``keep``.  A
+    (:func:`~mdgran.model.contact_scalar.schwarz_mean_force`, scaled for unlike beads), its
+    start's branch inversion (seven Newton steps) taken from ``memo`` when the last one of
+    contact j was there (the same number): a kicked contact's end of one step is its start of
+    the next.  Its end's goes into ``memo[j]`` if ``keep``.  A
     contact's memo is written by the one segment that owns it, or by the one event window
     that holds it; a window's neighbour bead reads its other contact's memo without writing
     it (two windows may share that contact).  Whether it is written changes no result, only
