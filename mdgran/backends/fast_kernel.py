@@ -331,7 +331,7 @@ class Lanes(NamedTuple):
     """The event windows' lanes (:func:`step_lane`): what stepping a window changes besides
     the beads and its contacts' states, one row per lane."""
 
-    counters: np.ndarray  # [LANES] COUNTERS: a window's own (status, events, chatter guard)
+    counters: np.ndarray  # [LANES, 1] COUNTERS: a window's own (status, events, chatter guard)
     log: EventLog  # [LANES, capacity] each lane's events of the step, window after window
     switching: np.ndarray  # [LANES, FLAG_CAP] contacts switching at the located event time
     chatter: np.ndarray  # [LANES, CHAT_CAP, 2] the chatter guard's (contact, switches)
@@ -463,7 +463,7 @@ def new_log(capacity: int, lanes: tuple = ()) -> EventLog:
 def new_lanes(capacity: int) -> Lanes:
     """:class:`Lanes` whose event buffers hold ``capacity`` events each (the pages are touched
     only as far as a step's events reach)."""
-    return Lanes(np.zeros(LANES, dtype=COUNTERS), new_log(capacity, (LANES,)),
+    return Lanes(np.zeros((LANES, 1), dtype=COUNTERS), new_log(capacity, (LANES,)),
                  np.zeros((LANES, FLAG_CAP), dtype=np.int64),
                  np.zeros((LANES, CHAT_CAP, 2), dtype=np.int64))
 
@@ -491,7 +491,7 @@ def at_run_time(flags):
     return Flags(*flags)
 
 
-@njit(cache=True)
+@njit(inline="always")
 def across(walls, x, j):
     """x_left - x_right of contact j (walls at x = 0)."""
     n = x.shape[0]
@@ -661,7 +661,7 @@ def fail(counters, status, j):
     counters.bad_contact = j
 
 
-@njit(cache=True)
+@njit(inline="always")
 def record_event(ks, j, t, kind, loss):
     """Append event (t, contact index j, kind 1 close / 0 open, hysteresis loss) to the
     log."""
@@ -1118,7 +1118,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
 
 
 # ---- event location and switching (rare path; flags at run time) --------------------------
-@njit(cache=True)
+@njit(inline="always")
 def event_function(walls, params, j, beads, closed):
     """(g, g', g'') of contact j in its current state (g > 0 inside the state)."""
     d = across(walls, beads.x, j) - params.gap
@@ -1129,7 +1129,7 @@ def event_function(walls, params, j, beads, closed):
     return -d, -r, -q
 
 
-@njit(cache=True)
+@njit(inline="always")
 def first_root(walls, params, j, old, x_new, closed, h):
     """First s in [0, h] where g(s) = g0 + s g0' + s^2/2 g0'' falls to min(g0, 0), or -1."""
     g0, b, q = event_function(walls, params, j, old, closed)
@@ -1188,7 +1188,7 @@ def locate_events(walls, params, old, x_new, h, tol, ks, jl, jr):
     return te, ns
 
 
-@njit(cache=True)
+@njit(inline="always")
 def count_switch(ks, j, t):
     """Chatter guard: count the switches of contact j at the instant t; more than
     MAX_SWITCHES stop the run."""
@@ -1272,9 +1272,13 @@ def settle(flags, params, contacts, count, t, beads, ks):
 
 @njit(cache=True)
 def settle_all(flags, params, t, beads, ks):
-    """The initial settle, over every contact."""
+    """The initial settle, over every contact, with the run's counters, log and chatter guard
+    seen as a :class:`Lane` (the switching functions are then compiled for one record
+    type, the event windows')."""
     m = ks.closed.shape[0]
-    settle(flags, params, np.arange(m), m, t, beads, ks)
+    lane = Lane(ks.closed, ks.counters, ks.log, ks.lanes.switching[0], ks.chatter,
+                ks.seg.branch, ks.local)
+    settle(flags, params, np.arange(m), m, t, beads, lane)
 
 
 @njit(cache=True)
@@ -1369,7 +1373,7 @@ def find_windows(walls, params, old, x_new, h, ks):
     return count
 
 
-@njit(cache=True)
+@njit(inline="always")
 def window_power(flags, params, beads, closed, lo, hi, t):
     """Damping power of window lo .. hi in state ``beads`` at time t: its contacts' (edges
     included, rates from v) and its beads' substrate damping."""
@@ -1389,7 +1393,7 @@ def window_power(flags, params, beads, closed, lo, hi, t):
     return p
 
 
-@njit(cache=True)
+@njit(inline="always")
 def start_force(flags, params, beads, closed, j):
     """Force of contact j in state ``beads`` (damping rate from v)."""
     if j < 0 or not closed[j]:
@@ -1400,7 +1404,7 @@ def start_force(flags, params, beads, closed, j):
     return f
 
 
-@njit(cache=True)
+@njit(inline="always")
 def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
     """Bead b of a window sub-step ending at t1: acceleration and end velocity from its net
     contact forces (f, fv), as the pass; ``nxt`` holds its predicted x, v_half and (in
@@ -1620,7 +1624,7 @@ def drop_window(ks, k, count):
 def lane_view(closed, memo, local, lanes, g):
     """Lane g of ``lanes`` as a :class:`Lane`."""
     log = lanes.log
-    return Lane(closed, lanes.counters[g:g + 1],
+    return Lane(closed, lanes.counters[g],
                 EventLog(log.time[g], log.contact[g], log.kind[g], log.loss[g]),
                 lanes.switching[g], lanes.chatter[g], memo, local)
 
@@ -1762,7 +1766,7 @@ def local_events(flags, params, old, new, t0, dt, ks, run_lanes):
     trapezoid of the excitations' power, and their count."""
     count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
     for g in range(LANES):
-        ks.lanes.counters[g].events = 0
+        ks.lanes.counters[g, 0].events = 0
     again = True
     while again:
         run_lanes(params, old, new, t0, dt, ks, count)
