@@ -295,22 +295,36 @@ class LammpsBackend(Backend):
         ``fix move`` (nve) and ``fix substrate`` go."""
         import tempfile
 
+        # every rank writes its own copies (no shared file system)
+        self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
+        args = self._native_model_args(Path(self._tmpdir.name))
+        setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
+        mode_args, unfixes = self._native_mode(lmp)
+        for cmd in (*setup, *unfixes, "fix contact all mdgran/chain " + " ".join(args + mode_args),
+                    "fix_modify contact energy yes"):
+            lmp.command(cmd)
+        self._events_read = 0
+        self._initial_state(lmp)  # thermal velocities (the fix reads v at its set-up)
+        if self.table_file is not None and self.table is not None and self.rank == 0:
+            self.table.write_lammps(self.table_file)
+
+    def _native_model_args(self, folder: Path) -> list:
+        """The arguments of ``fix mdgran/chain`` that state the chain's physics: the law, its
+        damping and substrate, walls and gap, and the files it reads (written into
+        ``folder``): the force table, unlike beads, the excitations."""
         m, law = self.model, self.law
         args = ["law hertz" if law.kind == "hertz" else f"law schwarz fc {law.fc!r}",
                 f"snap_off {law.snap_off}", f"damping {float(m.damping)!r}",
                 f"k1 {float(m.k1)!r}", f"k3 {float(m.k3)!r}", f"gap {float(m.gap)!r}",
                 f"walls {'yes' if self.walls else 'no'}",
                 f"closed {'yes' if m.gap <= 0 else 'no'}"]
-        # every rank writes its own copies (no shared file system)
-        self._tmpdir = tempfile.TemporaryDirectory(prefix="mdgran-spline-")
         if self.table is not None:
-            path = Path(self._tmpdir.name) / "contact.spline"
+            path = folder / "contact.spline"
             native_plugin.write_spline(self.table, path)
             args.append(f"table {path}")
         if m.mixed:
             points = self.table.n if self.table is not None else None
-            path = native_plugin.write_mixture(m, Path(self._tmpdir.name), points)
-            args.append(f"mixture {path}")
+            args.append(f"mixture {native_plugin.write_mixture(m, folder, points)}")
         if m.substrate_damping:
             args.append(f"sub_damping {float(m.substrate_damping)!r}")
         if m.drive is not None and m.drive.pulse is not None:  # tag = bead + 1 (+ 1: walls)
@@ -318,28 +332,26 @@ class LammpsBackend(Backend):
             args.append(f"pulse {p.bead + (2 if self.walls else 1)} {float(p.amplitude)!r} "
                         f"{float(p.duration)!r} {float(p.start)!r}")
         if m.drive is not None and m.drive.base is not None:
-            path = native_plugin.write_base(m.drive.base, Path(self._tmpdir.name) / "base.txt")
-            args.append(f"base {path}")
+            args.append(f"base {native_plugin.write_base(m.drive.base, folder / 'base.txt')}")
+        return args
+
+    def _native_mode(self, lmp) -> tuple:
+        """``(arguments, unfix commands)`` of the event mode: located, the fix integrates and
+        owns the substrate (``fix move`` and ``fix substrate`` go); quantized, it applies the
+        tether's force and does fix nve's work in their place."""
         from .hook import tether_stiffness
 
-        setup = ["unfix contact", *native_plugin.load_commands(self.plugin)]
-        if self.event_mode == "located":  # the fix integrates and owns the substrate
-            args.append("events located")
-            setup += [f"unfix {fix}" for fix in ("move", "substrate") if lmp.has_id("fix", fix)]
-        else:  # the fix applies the tether's force and does fix nve's work
-            if lmp.has_id("fix", "substrate"):
-                args.append(f"tether {tether_stiffness(m.k1)!r}")
-                setup.append("unfix substrate")
-            if lmp.has_id("fix", "move"):
-                args.append("integrate yes")
-                setup.append("unfix move")
-        for cmd in (*setup, "fix contact all mdgran/chain " + " ".join(args),
-                    "fix_modify contact energy yes"):
-            lmp.command(cmd)
-        self._events_read = 0
-        self._initial_state(lmp)  # thermal velocities (the fix reads v at its set-up)
-        if self.table_file is not None and self.table is not None and self.rank == 0:
-            self.table.write_lammps(self.table_file)
+        if self.event_mode == "located":
+            return ["events located"], [f"unfix {fix}" for fix in ("move", "substrate")
+                                        if lmp.has_id("fix", fix)]
+        args, unfixes = [], []
+        if lmp.has_id("fix", "substrate"):
+            args.append(f"tether {tether_stiffness(self.model.k1)!r}")
+            unfixes.append("unfix substrate")
+        if lmp.has_id("fix", "move"):
+            args.append("integrate yes")
+            unfixes.append("unfix move")
+        return args, unfixes
 
     def _read_native(self):
         """Dissipation, new events and contact states from fix mdgran/chain (synced over ranks at
