@@ -31,6 +31,14 @@ BACKEND_STYLES = [dict(ls="-", lw=2.6, alpha=0.55), dict(ls="--", lw=1.2, alpha=
 HORIZON_STYLE = dict(color="k", ls="-.", lw=1.0)
 
 
+def _write_figure(plt, fig, path: Path, rect=None):
+    """Lay ``fig`` out (its panels within ``rect`` of the figure, all of it by default), write
+    it to ``path`` (PNG, 110 dpi) and close it."""
+    fig.tight_layout(rect=rect)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _figures(out: Path, scene, runs, pred, report, pairs):
     import matplotlib
 
@@ -52,9 +60,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     ax.set(xlabel="time (1/q)", ylabel="energy / E_imp",
            title=f"{scene.name}: energy ledger terms ({', '.join(r.name for r in runs)})")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.tight_layout()
-    fig.savefig(out / "energies.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "energies.png")
     # ledger error
     fig, ax = plt.subplots(figsize=(8, 4))
     for r, ls in zip(runs, styles):
@@ -63,9 +69,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     ax.set(xlabel="time (1/q)", ylabel="|E(t) - E0| / E_imp",
            title="energy-ledger error of each backend")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "ledger_error.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "ledger_error.png")
     # differences
     fig, ax = plt.subplots(figsize=(8, 4.5))
     ref = runs[0]
@@ -90,9 +94,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     ax.set(xlabel="time (1/q)", ylabel="max_i |x_i - x_i'| (units of p)",
            title="difference between backends (black vertical line: predictability horizon)")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "difference.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "difference.png")
     # event timelines
     fig, axs = plt.subplots(1, len(runs), figsize=(4 * len(runs) + 1, 4.5), sharey=True,
                             squeeze=False)
@@ -109,9 +111,7 @@ def _figures(out: Path, scene, runs, pred, report, pairs):
     # above the panels: inside, it hid the events of a busy run (macro-hertz has ~1700)
     fig.legend(*axs[0][0].get_legend_handles_labels(), loc="upper center", ncol=2, fontsize=8,
                frameon=False)
-    fig.tight_layout(rect=(0, 0, 1, 0.94))
-    fig.savefig(out / "events.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "events.png", rect=(0, 0, 1, 0.94))
     _cluster_figures(out, runs, report, pairs, plt)
 
 
@@ -157,9 +157,7 @@ def _cluster_figures(out, runs, report, pairs, plt):
     a3.set(xscale="log", xlabel="cluster lifetime (1/q)", ylabel="cumulative fraction")
     if a3.get_legend_handles_labels()[0]:
         a3.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "clusters.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "clusters.png")
     fig, ax = plt.subplots(figsize=(8, 4))
     for r in runs:
         ax.plot(r.nominal.time, r.nominal.measures.c_eff, label=r.name,
@@ -169,9 +167,7 @@ def _cluster_figures(out, runs, report, pairs, plt):
     ax.set(xlabel="time (1/q)", ylabel="C_eff / C_+",
            title="effective damping, Eq. 9 (dash-dot: horizon)")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "c_eff.png", dpi=110)
-    plt.close(fig)
+    _write_figure(plt, fig, out / "c_eff.png")
 
 
 def _markdown(scene, runs, report) -> str:
