@@ -98,7 +98,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ..model.contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
+from ..model.contact_scalar import (SchwarzConstants, branch_t, branch_t4, law_energy, law_force,
                                     schwarz_mean_force_of_branch,
                                     spline_cubic)
 
@@ -282,7 +282,8 @@ class EventLog(NamedTuple):
     loss: np.ndarray
 
 
-# columns of Segments.real and Segments.ints
+# columns of Segments.real, Segments.ints and Segments.kick
+K_FV_LEFT, K_FV_RIGHT, K_BRANCH = 0, 1, 2
 R_POWER, R_FIRST, R_FIRST_KICK, R_LAST, R_LAST_KICK = 0, 1, 2, 3, 4
 I_FLAGGED, I_SWITCHES, I_STATUS, I_BAD = 0, 1, 2, 3
 
@@ -304,7 +305,8 @@ class Segments(NamedTuple):
     ev_contact: np.ndarray  # [m] int64 its contact
     kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
     #                     s * size + k (:func:`apply_kicks`)
-    kick_fv: np.ndarray  # [m, 2] the pass's Fv of the contacts left and right of kicked[k]
+    kick: np.ndarray  # [m, 3] the pass's Fv of the contacts left and right of kicked[k], and
+    #                   its branch parameter at the step's end (K_* columns)
     branch: np.ndarray  # [m, 2] contact j's last branch inversion (u, branch_t(u)); NaN: none
     #                     (:func:`memo_mean_force`)
 
@@ -433,7 +435,7 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
     return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
                     np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
                     np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64),
-                    np.zeros((n_contacts, 2)), np.full((n_contacts, 2), np.nan))
+                    np.zeros((n_contacts, 3)), np.full((n_contacts, 2), np.nan))
 
 
 def new_state(n: int, n_contacts: int, event_capacity: int,
@@ -622,24 +624,33 @@ def memo_branch(memo, j, u, law):
 
 
 @njit(inline="always")
-def memo_mean_force(flags, params, j, d0, d1, memo, keep):
+def kick_law(flags, params, j):
+    """(Schwarz constants, 1 / L, A) of contact j's law: its class's and its scales
+    (``A f(delta / L)``) for unlike beads; the one law and (1, 1) otherwise."""
+    if flags[MIXED]:
+        k = params.mix.kind[j]
+        return (class_law(params.mix, k), pair_at(params, k, P_INV_LEN),
+                pair_at(params, k, P_SCALE))
+    return params.law, 1.0, 1.0
+
+
+@njit(inline="always")
+def memo_mean_force(flags, params, j, d0, d1, t1, memo, keep):
     """Mean force of contact j over [d0, d1]
     (:func:`~mdgran.model.contact_scalar.schwarz_mean_force`, scaled for unlike beads), its
     start's branch inversion (seven Newton steps) taken from ``memo`` when the last one of
     contact j was there (the same number): a kicked contact's end of one step is its start of
-    the next.  Its end's goes into ``memo[j]`` if ``keep``.  A
+    the next.  ``t1``: its end's, if the caller has it (:func:`kick_branches`), else NaN.
+    Its end's goes into ``memo[j]`` if ``keep``.  A
     contact's memo is written by the one segment that owns it, or by the one event window
     that holds it; a window's neighbour bead reads its other contact's memo without writing
     it (two windows may share that contact).  Whether it is written changes no result, only
     the time."""
-    law, u0, u1, scale = params.law, d0, d1, 1.0
-    if flags[MIXED]:
-        k = params.mix.kind[j]
-        il = pair_at(params, k, P_INV_LEN)
-        law, u0, u1, scale = class_law(params.mix, k), d0 * il, d1 * il, pair_at(params, k,
-                                                                                  P_SCALE)
+    law, il, scale = kick_law(flags, params, j)
+    u0, u1 = d0 * il, d1 * il
     t0 = memo_branch(memo, j, u0, law)
-    t1 = branch_t(u1, law.sigma, law.t_min, law.delta_min)
+    if t1 != t1:
+        t1 = branch_t(u1, law.sigma, law.t_min, law.delta_min)
     if keep:
         memo[j, 0], memo[j, 1] = u1, t1
     f = schwarz_mean_force_of_branch(t0, t1, law)
@@ -799,11 +810,11 @@ def predicted(old, b, h):
     return old.x[b] + h * vh, vh, vh + hh * a
 
 
-@njit(cache=True)
-def pass_force(flags, params, old, closed, h, j, memo, keep):
+@njit(inline="always")
+def pass_force(flags, params, old, closed, h, j, t1, memo, keep):
     """``(F, Fv)`` of contact j at the end of the pass of length h from ``old`` (the force,
     and the force the beads' velocity kick uses: :func:`segment_pass`'s ``f`` and ``fv``),
-    by the pass's operations (``memo``, ``keep``: :func:`memo_mean_force`)."""
+    by the pass's operations (``t1``, ``memo``, ``keep``: :func:`memo_mean_force`)."""
     walls = flags[WALLS]
     n = old.x.shape[0]
     rshift = 0 if walls else 1
@@ -821,7 +832,7 @@ def pass_force(flags, params, old, closed, h, j, memo, keep):
     fv = f
     if in_kick_band(flags, params, j, d):
         d0 = across(walls, old.x, j) - params.gap
-        fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo, keep)
+        fv = (2.0 * memo_mean_force(flags, params, j, d0, d, t1, memo, keep)
               - force_at(flags, params, j, d0)[0])
     if flags[DAMPED]:
         f += params.damping * r
@@ -829,7 +840,7 @@ def pass_force(flags, params, old, closed, h, j, memo, keep):
     return f, fv
 
 
-@njit(cache=True)
+@njit(inline="always")
 def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
     """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces ``fv_l`` and
     ``fv_r`` of its left and right contacts (:func:`pass_force`), by the pass's operations."""
@@ -839,14 +850,42 @@ def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
     vn[b] = vh + 0.5 * h * av
 
 
+@njit(inline="always")
+def kick_branches(flags, params, old, h, kicked, kick, row, count):
+    """Column K_BRANCH of ``kick`` for the kicked contacts ``kicked[row: row + count]``: the
+    branch parameter (:func:`branch_t`) of each one's compression at the end of the pass of
+    length h from ``old`` (in its own units when mixed), by the pass's operations; with one
+    law, four inverted together (:func:`branch_t4`: the mean-force kicks of an active chain of
+    1e5 beads took 1.4 ns a bead-step, one inversion after another)."""
+    rshift = 0 if flags[WALLS] else 1
+    n = old.x.shape[0]
+    for k in range(row, row + count):
+        j = kicked[k]
+        lb, rb = j + rshift - 1, j + rshift
+        x_l = predicted(old, lb, h)[0] if lb >= 0 else 0.0
+        x_r = predicted(old, rb, h)[0] if rb < n else 0.0
+        kick[k, K_BRANCH] = (x_l - x_r - params.gap) * kick_law(flags, params, j)[1]
+    if flags[MIXED]:
+        for k in range(row, row + count):
+            law = kick_law(flags, params, kicked[k])[0]
+            kick[k, K_BRANCH] = branch_t(kick[k, K_BRANCH], law.sigma, law.t_min, law.delta_min)
+        return
+    law, last = params.law, row + count - 1
+    for k in range(row, row + count, 4):  # the last four may repeat the last contact
+        k1, k2, k3 = min(k + 1, last), min(k + 2, last), min(k + 3, last)
+        t = branch_t4(kick[k, K_BRANCH], kick[k1, K_BRANCH], kick[k2, K_BRANCH],
+                      kick[k3, K_BRANCH], law.sigma, law.t_min, law.delta_min)
+        kick[k, K_BRANCH], kick[k1, K_BRANCH], kick[k2, K_BRANCH], kick[k3, K_BRANCH] = t
+
+
 @njit(cache=True)
-def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick_fv, row, j0, j1, count,
+def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick, row, j0, j1, count,
                 fv_first, fv_last, memo):
     """The mean-force kicks of a segment's contacts ``kicked[row: row + count]`` (in the band
     near snap-off, in order along the chain; its pass ran contacts j0 .. j1 - 1), after its
     pass: the velocities of the beads next to them that the pass finished, redone with each
     contact's ``Fv`` (:func:`pass_force`) and the pass's ``Fv`` of their other contacts
-    (``kick_fv``) by the pass's operations, and the pass's first and last ``Fv``; returns
+    (``kick``) by the pass's operations, and the pass's first and last ``Fv``; returns
     those two.  Each kicked contact's ``Fv`` (a mean force) is computed once and each bead
     redone once, however the kicked contacts neighbour each other.  Out of the pass's loop,
     whose registers a call inside it cost 20-30 % on a chain of unlike beads."""
@@ -858,21 +897,23 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick_fv, row, j0,
     # finished after it
     lo = max(j0 + rshift - (0 if j0 > 0 else 1), 0)
     hi = min(j1 + rshift - 2, n - 1)
+    kick_branches(flags, params, old, h, kicked, kick, row, count)
     prev, fv_prev = -2, 0.0  # the last kicked contact and its Fv
     for k in range(count):
         j = kicked[row + k]
-        fv = pass_force(flags, params, old, closed, h, j, memo, True)[1]
+        fv = pass_force(flags, params, old, closed, h, j, kick[row + k, K_BRANCH], memo,
+                        True)[1]
         if j == j0:
             fv_first = fv
         if j == j1 - 1:
             fv_last = fv
         b = j + rshift - 1  # the bead left of contact j (right of contact j - 1)
         if lo <= b <= hi:
-            fv_left = fv_prev if prev == j - 1 else kick_fv[row + k, 0]
+            fv_left = fv_prev if prev == j - 1 else kick[row + k, K_FV_LEFT]
             refinish(flags, params, old, vn, h, now, b, fv_left, fv)
         b += 1  # the bead right of contact j: now, unless contact j + 1 is kicked next
         if lo <= b <= hi and not (k + 1 < count and kicked[row + k + 1] == j + 1):
-            refinish(flags, params, old, vn, h, now, b, fv, kick_fv[row + k, 1])
+            refinish(flags, params, old, vn, h, now, b, fv, kick[row + k, K_FV_RIGHT])
         prev, fv_prev = j, fv
     return fv_first, fv_last
 
@@ -890,7 +931,7 @@ def quantized_due(closed, d, delta_off):
 @njit
 def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     """Segment ``s`` of one Verlet step of length h from the beads ``old`` into ``(xn, vn,
-    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv,
+    an)`` (:class:`Segments`; ``seg = (h, t0, size, flag, ev_real, ev_contact, kicked, kick,
     branch, jlo, jhi)``: its contacts from ``jlo`` to ``jhi - 1`` alone, the rest of the
     pass's activity front being at rest, :func:`step_range`): returns its row of
     ``Segments.real`` (damping power from the v_est rates, and the forces of its first and
@@ -912,7 +953,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     (delta1 - delta0), exact along a straight path, through Fv = 2 f_mean - f0 (so that
     h/2 (f0 + Fv) = h f_mean): second order again.
     """
-    h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo, jhi = seg
+    h, t0, size, flag, ev_real, ev_contact, kicked, kick, branch, jlo, jhi = seg
     walls = flags[WALLS]
     now = drive_at(flags, params, t0 + h)
     xo, vo, ao = old.x, old.v, old.a
@@ -973,11 +1014,11 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         f_r = f if cl else 0.0
         fv_r = f_r
         if last_kicked + one == j:  # the kicked contact left: this is its right neighbour
-            kick_fv[row + np.uint64(nkick) - one, 1] = fv_r
+            kick[row + np.uint64(nkick) - one, K_FV_RIGHT] = fv_r
         # near snap-off: the mean-force kick, after the loop (apply_kicks)
         if cl and in_kick_band(flags, params, j, d):
             kicked[row + np.uint64(nkick)] = np.int64(j)
-            kick_fv[row + np.uint64(nkick), 0] = fv_l
+            kick[row + np.uint64(nkick), K_FV_LEFT] = fv_l
             nkick += 1
             last_kicked = j
         g = d - doff if cl else -d
@@ -1002,7 +1043,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
         f_l, fv_l = f_r, fv_r
     if nkick > 0:
         fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
-                                     kicked, kick_fv, np.int64(row), np.int64(j0), np.int64(j1),
+                                     kicked, kick, np.int64(row), np.int64(j0), np.int64(j1),
                                      nkick, fv_first, fv_l, branch)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
@@ -1103,7 +1144,7 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         return power
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
-                               seg.kicked, seg.kick_fv, seg.branch, 0, ks.closed.shape[0]),
+                               seg.kicked, seg.kick, seg.branch, 0, ks.closed.shape[0]),
                               0)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
@@ -1455,7 +1496,7 @@ def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi, memo):
                     band |= edge
                 else:
                     d0 = across(walls, cur.x, j) - params.gap
-                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, memo, True)
+                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, math.nan, memo, True)
                           - force_at(flags, params, j, d0)[0])
             if flags[DAMPED]:
                 f += params.damping * r
@@ -1492,12 +1533,12 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     im, g = bead_factors(flags, params, b)
     if window_left:  # the edge is b's left contact: +F on b
         jo = b - s + 1
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo, False)
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, memo, False)
                    if jo < closed.shape[0] else (0.0, 0.0))
         f, fv, dj = f_edge - fo, f_edge - fvo, impulse
     else:  # the edge is b's right contact: -F on b
         jo = b - s
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, memo, False) if jo >= 0
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, memo, False) if jo >= 0
                    else (0.0, 0.0))
         f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
     a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
@@ -2055,9 +2096,9 @@ def _make_advance(flags, nrt: bool):
         """Segment s of a pass (:func:`segment_pass`), its results into row s of
         ``Segments.real`` and ``.ints``.  A call of its own in :func:`run_segments`'s
         parallel loop: inlined there, numba's array analysis of the loop fails on it."""
-        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo, jhi = seg
+        h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick, branch, jlo, jhi = seg
         r, i = segment_pass(literal, params, old, xn, vn, an, closed,
-                            (h, t0, size, flag, ev_real, ev_contact, kicked, kick_fv, branch, jlo,
+                            (h, t0, size, flag, ev_real, ev_contact, kicked, kick, branch, jlo,
                              jhi), s)
         for k in range(5):
             real[s, k] = r[k]
@@ -2079,14 +2120,14 @@ def _make_advance(flags, nrt: bool):
         xo, vo, ao = old
         xn, vn, an = new
         closed = ks.closed
-        size, count, real, ints, flag, ev_real, ev_contact, kicked, kick_fv, branch = ks.seg
+        size, count, real, ints, flag, ev_real, ev_contact, kicked, kick, branch = ks.seg
         jlo, jhi = ks.counters[0].pass_lo, ks.counters[0].pass_hi
         first, last = ks.counters[0].seg_first, ks.counters[0].seg_last
         if last - first + 1 < PARALLEL_SEGMENTS:  # a few: in order, no threads to wake
             for s in range(first, last + 1):
                 one_segment(params, old, xn, vn, an, closed,
                             (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
-                             kick_fv, branch, jlo, jhi), s)
+                             kick, branch, jlo, jhi), s)
             return merge_segments(literal, params, old, new, h, t0 + h, ks)
         for s in prange(first, last + 1):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
@@ -2095,7 +2136,7 @@ def _make_advance(flags, nrt: bool):
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
             one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick_fv,
+                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick,
                          branch, jlo, jhi), s)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 

@@ -85,6 +85,22 @@ def branch_delta(t, sigma):
     return math.pow(t, 4.0) - 4.0 * sigma * t
 
 
+@njit(inline="always")
+def branch_newton_start(delta, t_min, delta_min):
+    """``(rhs, w, 6 t_min^2)``: the right-hand side ``sqrt(delta - delta_min)`` of
+    :func:`branch_t`'s equation and its Newton iteration's start (``t_min > 0``)."""
+    rhs = math.sqrt(max(delta - delta_min, 0.0))
+    big = 6.0 * t_min * t_min
+    return rhs, min(rhs / math.sqrt(big), math.sqrt(rhs)), big
+
+
+@njit(inline="always")
+def branch_newton_step(w, rhs, t_min, big):
+    """One Newton step of :func:`branch_t` on ``phi(w) = rhs`` (``big = 6 t_min^2``)."""
+    sq = math.sqrt(w * w + 4.0 * t_min * w + big)
+    return w - (w * sq - rhs) / (sq + w * (w + 2.0 * t_min) / sq)
+
+
 @njit(cache=True)
 def branch_t(delta, sigma, t_min, delta_min):
     """Branch parameter ``t >= t_min`` with ``t^4 - 4 sigma t = delta``, clamped to ``t_min``
@@ -97,15 +113,33 @@ def branch_t(delta, sigma, t_min, delta_min):
     the whole branch: errors 0.29, 4e-2, 8e-4, 3e-7, 4e-14, 2e-16, so NEWTON_STEPS = 7 is a
     margin); DMT (``t_min = 0``): ``t = sqrt(rhs)`` exactly.
     """
-    rhs = math.sqrt(max(delta - delta_min, 0.0))
     if t_min == 0.0:
-        return math.sqrt(rhs)
-    big = 6.0 * t_min * t_min
-    w = min(rhs / math.sqrt(big), math.sqrt(rhs))
+        return math.sqrt(math.sqrt(max(delta - delta_min, 0.0)))
+    rhs, w, big = branch_newton_start(delta, t_min, delta_min)
     for _ in range(NEWTON_STEPS):
-        sq = math.sqrt(w * w + 4.0 * t_min * w + big)
-        w = w - (w * sq - rhs) / (sq + w * (w + 2.0 * t_min) / sq)
+        w = branch_newton_step(w, rhs, t_min, big)
     return t_min + max(w, 0.0)
+
+
+@njit(cache=True)
+def branch_t4(d0, d1, d2, d3, sigma, t_min, delta_min):
+    """:func:`branch_t` of four compressions of one law, bit for bit, their Newton steps
+    interleaved: one inversion is a chain of dependent square roots and divisions, and four
+    independent chains keep the processor's units busy (45 against 75 ns an inversion)."""
+    if t_min == 0.0:
+        return (branch_t(d0, sigma, t_min, delta_min), branch_t(d1, sigma, t_min, delta_min),
+                branch_t(d2, sigma, t_min, delta_min), branch_t(d3, sigma, t_min, delta_min))
+    r0, w0, big = branch_newton_start(d0, t_min, delta_min)
+    r1, w1, _ = branch_newton_start(d1, t_min, delta_min)
+    r2, w2, _ = branch_newton_start(d2, t_min, delta_min)
+    r3, w3, _ = branch_newton_start(d3, t_min, delta_min)
+    for _ in range(NEWTON_STEPS):
+        w0 = branch_newton_step(w0, r0, t_min, big)
+        w1 = branch_newton_step(w1, r1, t_min, big)
+        w2 = branch_newton_step(w2, r2, t_min, big)
+        w3 = branch_newton_step(w3, r3, t_min, big)
+    return (t_min + max(w0, 0.0), t_min + max(w1, 0.0), t_min + max(w2, 0.0),
+            t_min + max(w3, 0.0))
 
 
 @njit(cache=True)
