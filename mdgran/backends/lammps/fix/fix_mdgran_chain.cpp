@@ -1055,7 +1055,12 @@ void FixMdgranChain::build_contacts()
 // f delta' is a polynomial of degree 9, so 5-point Gauss-Legendre is exact.
 double MdgranLaw::mean_force(double d0, double d1) const
 {
-  double ta = t_of_delta(d0), tb = t_of_delta(d1);
+  return mean_force_t(t_of_delta(d0), t_of_delta(d1));
+}
+
+// mean_force from the branch parameters ta = t(d0), tb = t(d1) of the interval's ends
+double MdgranLaw::mean_force_t(double ta, double tb) const
+{
   double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
   double num = 0.0, den = 0.0;
   for (int k = 0; k < 5; k++) {
@@ -1243,6 +1248,7 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
   drift_h = -1.0;
   double power = 0.0;
   flagged.clear();
+  kicks.clear();
   // every contact, or the front's (pick: their indices), in the order of cons (the power sums
   // the same terms, less exact zeros); one loop, not a function called from two loops, which
   // the compiler need not inline into both (the loop over every contact is the hot one)
@@ -1265,10 +1271,8 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
                      update->ntimestep * update->dt, contact_number(tag[c.l]));
         F = located_force(d);
         Fv = F;
-        if (h > 0.0 && d < sing_) {    // near snap-off: mean-force kick
-          double d0 = ustart(c.l) - ustart(c.r) - gap_;
-          Fv = 2.0 * mean_force(d0, d) - located_force(d0);
-        }
+        if (h > 0.0 && d < sing_)    // near snap-off: the mean-force kick, after the loop
+          kicks.push_back({c.l, ustart(c.l) - ustart(c.r) - gap_, d, rate});
       }
       if (damping_ != 0.0) {
         F += damping_ * rate;
@@ -1286,6 +1290,7 @@ template <bool MIX> double FixMdgranChain::located_pass_t(double h)
     fcon_[c.l] = F;
     fkick_[c.l] = Fv;
   }
+  if (!kicks.empty()) finish_kicks();
   if (h > 0.0)    // the same test for the contacts between two ghosts (event windows)
     for (const Con &c : gcons) {
       const double d = u_[c.l] - u_[c.r] - gap_, rate = w_[c.l] - w_[c.r];
@@ -1334,6 +1339,30 @@ double FixMdgranChain::closed_force(tagint t, double d) const
                "{:g}) at t = {:.12g}, contact {}", u1, law.tab_delta_max,
                update->ntimestep * update->dt, contact_number(t));
   return m_scale[t] * law.located_force(u1);
+}
+
+// The kick forces Fv = 2 mean_force(d0, d) - f(d0) (+ c rate) of the pass's contacts in the
+// band near snap-off (one law), by the pass's operations, their branch parameters inverted
+// T_BLOCK at a time (t_of_delta_n: one inversion is a chain of dependent square roots and
+// divisions; one by one in the pass, the kicks of an active chain cost ~1.5 ns a bead-step)
+void FixMdgranChain::finish_kicks()
+{
+  constexpr int HALF = T_BLOCK / 2;
+  double d[T_BLOCK], t[T_BLOCK];
+  for (size_t b = 0; b < kicks.size(); b += HALF) {
+    const int n = (int) std::min<size_t>(HALF, kicks.size() - b);
+    for (int j = 0; j < n; j++) {
+      d[j] = kicks[b + j].d0;
+      d[n + j] = kicks[b + j].d;
+    }
+    t_of_delta_n(d, t, 2 * n);
+    for (int j = 0; j < n; j++) {
+      const Kick &k = kicks[b + j];
+      double Fv = 2.0 * mean_force_t(t[j], t[n + j]) - located_force(k.d0);
+      if (damping != 0.0) Fv += damping * k.rate;
+      fkick[k.l] = Fv;
+    }
+  }
 }
 
 // Whether closed contact t at compression d gets the mean-force kick (never for Hertz): in its

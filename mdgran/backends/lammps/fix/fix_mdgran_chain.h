@@ -30,6 +30,7 @@ struct MdgranLaw {
   std::string read_table(const char *file);    // "" or what is wrong
   double law_force(double delta) const;     // attached branch, exact (Newton) or table
   double mean_force(double d0, double d1) const;    // (V(d1) - V(d0)) / (d1 - d0), Schwarz
+  double mean_force_t(double t0, double t1) const;  // the same from t(d0), t(d1)
   double law_energy(double delta) const;    // V(delta) on the attached branch, exact
   double exact_force(double delta) const;
   // cubic spline in w = sqrt(delta - base), as ContactTable.force (Horner, highest power first)
@@ -170,6 +171,12 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   std::vector<Con> cons;                    // contacts this rank evaluates
   std::vector<Con> gcons;                   // contacts between two ghosts (event windows)
   std::vector<Con> flagged;                 // contacts with a possible event in the pass
+  struct Kick {
+    int l;                                  // left atom of a contact in the mean-force band
+    double d0, d, rate;                     // its compression at the pass's start and end
+  };
+  std::vector<Kick> kicks;                  // the pass's contacts in the band (one law)
+  void finish_kicks();
   std::vector<int> runs;                    // owned atoms it moves, [begin, end) pairs
   std::vector<int> still;                   // the other owned atoms (walls, outside the group)
   std::vector<int> wall_atoms;              // walls among the owned and ghost atoms
