@@ -5,26 +5,29 @@
 
 Each point is micro-star's physics with ``chain.n = N`` and ``thermal.temperature = T``
 (``thermal.seed = 1``), struck at bead 1 (v0 = 12): at T = 0 the beads the pulse has not
-reached are at rest (the fast backend steps only its activity front, so its ns per bead-step
-of the whole chain fall with N); at T = 1e-6 every bead moves, slightly, and contacts switch
-only where the pulse is (a quiet chain stepped whole); at T = 2 contacts snap shut and apart
-all along the chain (about 0.08 events per bead per time unit).  A point runs in a process of its own
-(``mpiexec -n 2`` for two ranks): set-up and one warm-up block of steps are not timed, then
-``--repeats`` blocks of the same number of steps are, each on its own.  A block is
-``--block-time`` time units (800 steps by default) whatever N, so that every chain is
-timed over the same part of its history (a thermal chain's events are most frequent early:
-its damping takes its energy).  Reported per point:
-the median ns per bead-step of the stepping (wall time of the compiled loop for ``fast``, of
-LAMMPS's ``run`` for ``native``) with its min and max, the process's CPU ns per bead-step
-over the timed blocks (all threads of the process; rank 0's for ``native``), the events in
-the timed blocks, and the event windows stepped (``fast``).  ``os.getloadavg()`` before and
-after each point says whether the two cores were idle.
+reached are at rest (the fast backend steps only its activity front, so its ns per bead-step of
+the whole chain fall with N); at T = 1e-6 every bead moves, slightly, and contacts switch only
+where the pulse is (a quiet chain stepped whole); at T = 2 contacts snap shut and apart all
+along the chain (about 0.08 events per bead per time unit). A point runs in a process of its
+own (``mpiexec -n 2`` for two ranks): set-up and one warm-up block of steps are not timed, then
+``--repeats`` blocks of the same number of steps are, each on its own, and the whole matrix is
+measured ``--rounds`` times (every other time in reverse order), so that a slow spell of the
+machine does not fall on one point only. A block is ``--block-time`` time units (800 steps by
+default) whatever N, so that every chain is timed over the same part of its history (a thermal
+chain's events are most frequent early: its damping takes its energy). Reported per point: the
+median ns per bead-step of the stepping over the blocks of all rounds (wall time of the
+compiled loop for ``fast``, of LAMMPS's ``run`` for ``native``) with its min and max and each
+round's median, the process's CPU ns per bead-step over the timed blocks (all threads of the
+process; rank 0's for ``native``), the events in the timed blocks, and the event windows
+stepped (``fast``). ``os.getloadavg()`` before and after each point says whether the two cores
+were idle.
 
 Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
-Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at
-every N; two ranks at least 1.8x one rank at N = 1e6, active.  Writes benchmarks/results/active_chains.json (``--out``);
-a run of some backends replaces their rows there and keeps the other backends' rows.
+Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at every
+N; two ranks at least 1.8x one rank at N = 1e6, active. Writes
+benchmarks/results/active_chains.json (``--out``); a run of some backends replaces their rows
+there and keeps the other backends' rows.
 """
 from __future__ import annotations
 
@@ -143,17 +146,41 @@ def measure(n, temperature, backend, repeats, block_time, timeout):
     if res.returncode or len(reports) != ranks:
         return {**row, "error": (res.stderr or res.stdout)[-600:]}
     r0 = reports[0]
-    ns = 1e9 * np.array(r0["wall_s"]) / (n * steps)
-    cpu = 1e9 * sum(r0["cpu_s"]) / (n * steps * repeats)
-    row.update({"ns_per_bead_step_median": float(np.median(ns)),
-                "ns_per_bead_step_min": float(ns.min()),
-                "ns_per_bead_step_max": float(ns.max()),
-                "cpu_ns_per_bead_step": float(cpu),
+    row.update({"ns_blocks": [1e9 * w / (n * steps) for w in r0["wall_s"]],
+                "cpu_ns_per_bead_step": 1e9 * sum(r0["cpu_s"]) / (n * steps * repeats),
                 "peak_rss_MB_per_rank": [r["rss_MB"] for r in reports]})
     for key in ("events", "event_windows", "threads"):
         if key in r0:
             row[key] = r0[key]
     return row
+
+
+def pooled(rounds):
+    """One point's row from its rounds (each a :func:`measure` row): the median, min and max
+    of all their blocks, each round's median, the CPU time averaged over the rounds, the load
+    averages of each."""
+    bad = [r for r in rounds if "error" in r]
+    if bad:
+        return bad[0]
+    ns = np.concatenate([r["ns_blocks"] for r in rounds])
+    row = {k: v for k, v in rounds[0].items() if k not in ("ns_blocks", "loadavg_before",
+                                                            "loadavg_after")}
+    row.update({"rounds": len(rounds),
+                "loadavg_before": [r["loadavg_before"] for r in rounds],
+                "loadavg_after": [r["loadavg_after"] for r in rounds],
+                "ns_per_bead_step_median": float(np.median(ns)),
+                "ns_per_bead_step_min": float(ns.min()),
+                "ns_per_bead_step_max": float(ns.max()),
+                "ns_per_bead_step_round_medians": [float(np.median(r["ns_blocks"]))
+                                                   for r in rounds],
+                "cpu_ns_per_bead_step": float(np.mean([r["cpu_ns_per_bead_step"]
+                                                       for r in rounds]))})
+    return row
+
+
+def round_medians(row):
+    """A row's median of each round (a row of a single round: its median)."""
+    return row.get("ns_per_bead_step_round_medians", [row["ns_per_bead_step_median"]])
 
 
 def ratios(rows):
@@ -165,7 +192,9 @@ def ratios(rows):
         quiet = done.get((backend, n, QUIET))
         if t == ACTIVE and quiet is not None:
             out.append({"backend": backend, "n": n, "active_over_quiet":
-                        r["ns_per_bead_step_median"] / quiet["ns_per_bead_step_median"]})
+                        r["ns_per_bead_step_median"] / quiet["ns_per_bead_step_median"],
+                        "rounds": [a / q for a, q in zip(round_medians(r),
+                                                         round_medians(quiet))]})
         if backend.endswith("-2"):
             one = done.get((backend[:-1] + "1", n, t))
             if one is not None:
@@ -190,6 +219,8 @@ def main(argv=None):
     ap.add_argument("--temperatures", type=float, nargs="+", default=[0.0, QUIET, ACTIVE])
     ap.add_argument("--backends", nargs="+", default=list(BACKENDS), choices=BACKENDS)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=2,
+                    help="times the whole matrix is measured, every other time in reverse order")
     ap.add_argument("--block-time", type=float, default=2.0,
                     help="time units per timed block (800 steps at dt = 0.0025)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per point")
@@ -202,14 +233,16 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.worker is not None:
         return worker(args)
-    rows = []
-    for n in (int(float(s)) for s in args.sizes.split(",")):
-        for backend in args.backends:
-            for t in args.temperatures:
-                row = measure(n, t, backend, args.repeats, args.block_time, args.timeout)
-                rows.append(row)
-                print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
-                      flush=True)
+    points = [(int(float(s)), backend, t) for s in args.sizes.split(",")
+              for backend in args.backends for t in args.temperatures]
+    measured = {p: [] for p in points}
+    for k in range(args.rounds):
+        for n, backend, t in points if k % 2 == 0 else points[::-1]:
+            row = measure(n, t, backend, args.repeats, args.block_time, args.timeout)
+            measured[n, backend, t].append(row)
+            print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
+                  flush=True)
+    rows = [pooled(measured[p]) for p in points]
     rows = kept_rows(Path(args.out), rows) + rows
     result = {"benchmark": __doc__.splitlines()[0], "dt": DT,
               "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
