@@ -283,7 +283,7 @@ class EventLog(NamedTuple):
 
 
 # columns of Segments.real, Segments.ints and Segments.kick
-K_FV_LEFT, K_FV_RIGHT, K_BRANCH = 0, 1, 2
+K_FV_LEFT, K_FV_RIGHT, K_T0, K_T1, K_DUE = range(5)
 R_POWER, R_FIRST, R_FIRST_KICK, R_LAST, R_LAST_KICK = 0, 1, 2, 3, 4
 I_FLAGGED, I_SWITCHES, I_STATUS, I_BAD = 0, 1, 2, 3
 
@@ -305,8 +305,9 @@ class Segments(NamedTuple):
     ev_contact: np.ndarray  # [m] int64 its contact
     kicked: np.ndarray  # [m] int64 contact k of segment s in the mean-force band at row
     #                     s * size + k (:func:`apply_kicks`)
-    kick: np.ndarray  # [m, 3] the pass's Fv of the contacts left and right of kicked[k], and
-    #                   its branch parameter at the step's end (K_* columns)
+    kick: np.ndarray  # [m, 5] the pass's Fv of the contacts left and right of kicked[k], and
+    #                   its branch parameters at the step's start and end (K_* columns;
+    #                   :func:`kick_branches`)
     branch: np.ndarray  # [m, 2] contact j's last branch inversion (u, branch_t(u)); NaN: none
     #                     (:func:`memo_mean_force`)
 
@@ -435,7 +436,7 @@ def new_segments(n_contacts: int, size: int | None = None) -> Segments:
     return Segments(size, count, np.zeros((count, 5)), np.zeros((count, 4), dtype=np.int64),
                     np.zeros((count, FLAG_CAP), dtype=np.int64), np.zeros((n_contacts, 2)),
                     np.zeros(n_contacts, dtype=np.int64), np.zeros(n_contacts, dtype=np.int64),
-                    np.zeros((n_contacts, 3)), np.full((n_contacts, 2), np.nan))
+                    np.zeros((n_contacts, 5)), np.full((n_contacts, 2), np.nan))
 
 
 def new_state(n: int, n_contacts: int, event_capacity: int,
@@ -635,20 +636,21 @@ def kick_law(flags, params, j):
 
 
 @njit(inline="always")
-def memo_mean_force(flags, params, j, d0, d1, t1, memo, keep):
+def memo_mean_force(flags, params, j, d0, d1, t0, t1, memo, keep):
     """Mean force of contact j over [d0, d1]
     (:func:`~mdgran.model.contact_scalar.schwarz_mean_force`, scaled for unlike beads), its
     start's branch inversion (seven Newton steps) taken from ``memo`` when the last one of
     contact j was there (the same number): a kicked contact's end of one step is its start of
-    the next.  ``t1``: its end's, if the caller has it (:func:`kick_branches`), else NaN.
-    Its end's goes into ``memo[j]`` if ``keep``.  A
+    the next.  ``t0``, ``t1``: the ends' branch parameters if the caller has them
+    (:func:`kick_branches`), else NaN.  Its end's goes into ``memo[j]`` if ``keep``.  A
     contact's memo is written by the one segment that owns it, or by the one event window
     that holds it; a window's neighbour bead reads its other contact's memo without writing
     it (two windows may share that contact).  Whether it is written changes no result, only
     the time."""
     law, il, scale = kick_law(flags, params, j)
     u0, u1 = d0 * il, d1 * il
-    t0 = memo_branch(memo, j, u0, law)
+    if t0 != t0:
+        t0 = memo_branch(memo, j, u0, law)
     if t1 != t1:
         t1 = branch_t(u1, law.sigma, law.t_min, law.delta_min)
     if keep:
@@ -811,10 +813,10 @@ def predicted(old, b, h):
 
 
 @njit(inline="always")
-def pass_force(flags, params, old, closed, h, j, t1, memo, keep):
+def pass_force(flags, params, old, closed, h, j, t0, t1, memo, keep):
     """``(F, Fv)`` of contact j at the end of the pass of length h from ``old`` (the force,
     and the force the beads' velocity kick uses: :func:`segment_pass`'s ``f`` and ``fv``),
-    by the pass's operations (``t1``, ``memo``, ``keep``: :func:`memo_mean_force`)."""
+    by the pass's operations (``t0``, ``t1``, ``memo``, ``keep``: :func:`memo_mean_force`)."""
     walls = flags[WALLS]
     n = old.x.shape[0]
     rshift = 0 if walls else 1
@@ -832,7 +834,7 @@ def pass_force(flags, params, old, closed, h, j, t1, memo, keep):
     fv = f
     if in_kick_band(flags, params, j, d):
         d0 = across(walls, old.x, j) - params.gap
-        fv = (2.0 * memo_mean_force(flags, params, j, d0, d, t1, memo, keep)
+        fv = (2.0 * memo_mean_force(flags, params, j, d0, d, t0, t1, memo, keep)
               - force_at(flags, params, j, d0)[0])
     if flags[DAMPED]:
         f += params.damping * r
@@ -851,31 +853,73 @@ def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
 
 
 @njit(inline="always")
-def kick_branches(flags, params, old, h, kicked, kick, row, count):
-    """Column K_BRANCH of ``kick`` for the kicked contacts ``kicked[row: row + count]``: the
-    branch parameter (:func:`branch_t`) of each one's compression at the end of the pass of
-    length h from ``old`` (in its own units when mixed), by the pass's operations; with one
-    law, four inverted together (:func:`branch_t4`: the mean-force kicks of an active chain of
-    1e5 beads took 1.4 ns a bead-step, one inversion after another)."""
-    rshift = 0 if flags[WALLS] else 1
+def invert4(law, kick, col, a, b, c, d):
+    """Rows a, b, c, d of column ``col`` of ``kick``: compressions replaced by their branch
+    parameters (:func:`branch_t4`; rows may repeat)."""
+    kick[a, col], kick[b, col], kick[c, col], kick[d, col] = branch_t4(
+        kick[a, col], kick[b, col], kick[c, col], kick[d, col], law.sigma, law.t_min,
+        law.delta_min)
+
+
+@njit(inline="always")
+def invert_due(law, kick, col, due, row, count):
+    """Column ``col`` of rows row .. row + count - 1 of ``kick`` (those whose column ``due``
+    is nonzero; all if due < 0): compressions replaced by their branch parameters, four
+    at a time (:func:`invert4`)."""
+    q, a, b, c = 0, 0, 0, 0
+    for k in range(row, row + count):
+        if due >= 0 and kick[k, due] == 0.0:
+            continue
+        if q == 3:
+            invert4(law, kick, col, a, b, c, k)
+            q = 0
+            continue
+        if q == 0:
+            a = k
+        elif q == 1:
+            b = k
+        else:
+            c = k
+        q += 1
+    if q > 0:
+        b = b if q > 1 else a
+        c = c if q > 2 else b
+        invert4(law, kick, col, a, b, c, c)
+
+
+@njit(inline="always")
+def kick_branches(flags, params, old, h, kicked, kick, row, count, memo):
+    """Columns K_T0 and K_T1 of ``kick`` for the kicked contacts ``kicked[row: row + count]``:
+    the branch parameters (:func:`branch_t`) of each one's compressions at the start and at
+    the end of the pass of length h from ``old`` (in its own units when mixed), by the pass's
+    operations; the start's from ``memo`` when it holds it (:func:`memo_mean_force`).  With
+    one law, the inversions four at a time (:func:`branch_t4`: one inversion is a chain of
+    dependent square roots and divisions), and the memo rows, far apart in a long chain, read
+    one after another before any is used (the kicks of an active chain of 1e5 beads took 1.4
+    ns a bead-step, one contact after another)."""
+    walls = flags[WALLS]
+    rshift = 0 if walls else 1
     n = old.x.shape[0]
     for k in range(row, row + count):
         j = kicked[k]
+        il = kick_law(flags, params, j)[1]
         lb, rb = j + rshift - 1, j + rshift
         x_l = predicted(old, lb, h)[0] if lb >= 0 else 0.0
         x_r = predicted(old, rb, h)[0] if rb < n else 0.0
-        kick[k, K_BRANCH] = (x_l - x_r - params.gap) * kick_law(flags, params, j)[1]
+        kick[k, K_T1] = (x_l - x_r - params.gap) * il
+        u0 = (across(walls, old.x, j) - params.gap) * il
+        hit = memo[j, 0] == u0
+        kick[k, K_T0] = memo[j, 1] if hit else u0
+        kick[k, K_DUE] = 0.0 if hit else 1.0
     if flags[MIXED]:
         for k in range(row, row + count):
             law = kick_law(flags, params, kicked[k])[0]
-            kick[k, K_BRANCH] = branch_t(kick[k, K_BRANCH], law.sigma, law.t_min, law.delta_min)
+            kick[k, K_T1] = branch_t(kick[k, K_T1], law.sigma, law.t_min, law.delta_min)
+            if kick[k, K_DUE] != 0.0:
+                kick[k, K_T0] = branch_t(kick[k, K_T0], law.sigma, law.t_min, law.delta_min)
         return
-    law, last = params.law, row + count - 1
-    for k in range(row, row + count, 4):  # the last four may repeat the last contact
-        k1, k2, k3 = min(k + 1, last), min(k + 2, last), min(k + 3, last)
-        t = branch_t4(kick[k, K_BRANCH], kick[k1, K_BRANCH], kick[k2, K_BRANCH],
-                      kick[k3, K_BRANCH], law.sigma, law.t_min, law.delta_min)
-        kick[k, K_BRANCH], kick[k1, K_BRANCH], kick[k2, K_BRANCH], kick[k3, K_BRANCH] = t
+    invert_due(params.law, kick, K_T1, -1, row, count)
+    invert_due(params.law, kick, K_T0, K_DUE, row, count)
 
 
 @njit(cache=True)
@@ -897,12 +941,12 @@ def apply_kicks(flags, params, old, vn, closed, h, t0, kicked, kick, row, j0, j1
     # finished after it
     lo = max(j0 + rshift - (0 if j0 > 0 else 1), 0)
     hi = min(j1 + rshift - 2, n - 1)
-    kick_branches(flags, params, old, h, kicked, kick, row, count)
+    kick_branches(flags, params, old, h, kicked, kick, row, count, memo)
     prev, fv_prev = -2, 0.0  # the last kicked contact and its Fv
     for k in range(count):
         j = kicked[row + k]
-        fv = pass_force(flags, params, old, closed, h, j, kick[row + k, K_BRANCH], memo,
-                        True)[1]
+        fv = pass_force(flags, params, old, closed, h, j, kick[row + k, K_T0],
+                        kick[row + k, K_T1], memo, True)[1]
         if j == j0:
             fv_first = fv
         if j == j1 - 1:
@@ -1496,7 +1540,8 @@ def window_pass(flags, params, cur, nxt, closed, h, t0, lo, hi, memo):
                     band |= edge
                 else:
                     d0 = across(walls, cur.x, j) - params.gap
-                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, math.nan, memo, True)
+                    fv = (2.0 * memo_mean_force(flags, params, j, d0, d, math.nan, math.nan, memo,
+                                                True)
                           - force_at(flags, params, j, d0)[0])
             if flags[DAMPED]:
                 f += params.damping * r
@@ -1533,13 +1578,13 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     im, g = bead_factors(flags, params, b)
     if window_left:  # the edge is b's left contact: +F on b
         jo = b - s + 1
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, memo, False)
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, math.nan, memo, False)
                    if jo < closed.shape[0] else (0.0, 0.0))
         f, fv, dj = f_edge - fo, f_edge - fvo, impulse
     else:  # the edge is b's right contact: -F on b
         jo = b - s
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, memo, False) if jo >= 0
-                   else (0.0, 0.0))
+        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, math.nan, memo,
+                              False) if jo >= 0 else (0.0, 0.0))
         f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
     a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
     new.x[b] = x
