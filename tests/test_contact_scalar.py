@@ -6,10 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from mdgran.model.contact import ContactLaw
 from mdgran.model import contact_scalar
-from mdgran.model.contact_scalar import (branch_t, hertz_energy, hertz_force, law_energy, law_force,
+from mdgran.model.contact_scalar import (branch_t, branch_t4, hertz_energy, hertz_force, law_energy, law_force,
                                    schwarz_constants, schwarz_energy, schwarz_force,
                                    schwarz_mean_force)
 
@@ -42,6 +44,20 @@ def test_branch_t_solves_the_branch_equation(law):
         assert t**4 - 4.0 * law.sigma * t == pytest.approx(d, rel=1e-13, abs=1e-13)
         assert float(law.t_of_delta(d)) == t  # contact.py inverts with this same function
     assert branch_t(law.delta_min - 1.0, law.sigma, law.t_min, law.delta_min) == law.t_min
+
+
+@settings(max_examples=200, deadline=None)
+@given(fc=st.floats(-2.0, -1.5), snap=st.sampled_from(["displacement", "force"]),
+       offsets=st.lists(st.one_of(st.floats(-1.0, 0.2), st.floats(0.0, 80.0),
+                                  st.floats(0.0, 1e-12)), min_size=4, max_size=4))
+def test_branch_t4_is_branch_t_bit_for_bit(fc, snap, offsets):
+    """The fast kernel's kicks invert four compressions at once (branch_t4, Newton steps
+    interleaved): each result is branch_t's, bit for bit, on any law between DMT and JKR and
+    at any compression (below delta_min, at it, just above, far above)."""
+    law = ContactLaw("schwarz", fc, snap)
+    d = [law.delta_min + o for o in offsets]
+    four = branch_t4(*d, law.sigma, law.t_min, law.delta_min)
+    assert list(four) == [branch_t(x, law.sigma, law.t_min, law.delta_min) for x in d]
 
 
 @pytest.mark.parametrize("law", LAWS[:3], ids=lambda law: str(law.fc))
