@@ -842,7 +842,15 @@ def pass_force(flags, params, old, closed, h, j, t0, t1, memo, keep):
     return f, fv
 
 
-@njit(inline="always")
+@njit(cache=True)
+def read_pass_force(flags, params, old, closed, h, j, memo):
+    """:func:`pass_force` of contact j, its memo read and not written: a call, for the event
+    windows' neighbours (inlined there as well, it cost ~10 s more to compile, for calls
+    that are rare beside the kicks')."""
+    return pass_force(flags, params, old, closed, h, j, math.nan, math.nan, memo, False)
+
+
+@njit(cache=True)
 def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
     """Bead b's end velocity ``v_half + h/2 a_v`` again, with the kick forces ``fv_l`` and
     ``fv_r`` of its left and right contacts (:func:`pass_force`), by the pass's operations."""
@@ -887,7 +895,7 @@ def invert_due(law, kick, col, due, row, count):
         invert4(law, kick, col, a, b, c, c)
 
 
-@njit(inline="always")
+@njit(cache=True)
 def kick_branches(flags, params, old, h, kicked, kick, row, count, memo):
     """Columns K_T0 and K_T1 of ``kick`` for the kicked contacts ``kicked[row: row + count]``:
     the branch parameters (:func:`branch_t`) of each one's compressions at the start and at
@@ -1576,15 +1584,13 @@ def finish_neighbour(flags, params, old, new, closed, h, t1, b, f_edge, impulse,
     x, vh, ve = predicted(old, b, h)
     now = drive_at(flags, params, t1)
     im, g = bead_factors(flags, params, b)
+    jo = b - s + 1 if window_left else b - s  # b's other contact
+    fo, fvo = 0.0, 0.0
+    if 0 <= jo < closed.shape[0]:
+        fo, fvo = read_pass_force(flags, params, old, closed, h, jo, memo)
     if window_left:  # the edge is b's left contact: +F on b
-        jo = b - s + 1
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, math.nan, memo, False)
-                   if jo < closed.shape[0] else (0.0, 0.0))
         f, fv, dj = f_edge - fo, f_edge - fvo, impulse
     else:  # the edge is b's right contact: -F on b
-        jo = b - s
-        fo, fvo = (pass_force(flags, params, old, closed, h, jo, math.nan, math.nan, memo,
-                              False) if jo >= 0 else (0.0, 0.0))
         f, fv, dj = fo - f_edge, fvo - f_edge, -impulse
     a, av = bead_accelerations(f, fv, x, ve, im, g, flags, params, now)
     new.x[b] = x
