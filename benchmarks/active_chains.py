@@ -236,8 +236,8 @@ def main(argv=None):
     points = [(int(float(s)), backend, t) for s in args.sizes.split(",")
               for backend in args.backends for t in args.temperatures]
     measured = {p: [] for p in points}
-    for k in range(args.rounds):
-        for n, backend, t in points if k % 2 == 0 else points[::-1]:
+    for turn in range(args.rounds):
+        for n, backend, t in points if turn % 2 == 0 else points[::-1]:
             row = measure(n, t, backend, args.repeats, args.block_time, args.timeout)
             measured[n, backend, t].append(row)
             print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),

@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 from mdgran.model.contact import ContactLaw
 from mdgran.model import contact_scalar
-from mdgran.model.contact_scalar import (branch_t, branch_t4, hertz_energy, hertz_force, law_energy, law_force,
-                                   schwarz_constants, schwarz_energy, schwarz_force,
-                                   schwarz_mean_force)
+from mdgran.model.contact_scalar import (branch_t, branch_t4, hertz_energy, hertz_force,
+                                         law_energy, law_force, schwarz_constants,
+                                         schwarz_energy, schwarz_force, schwarz_mean_force)
 
 LAWS = [ContactLaw("schwarz", fc) for fc in (-2.0, -1.85182, -1.5)] + [
     ContactLaw("schwarz", -1.65773, "force")]
