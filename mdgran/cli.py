@@ -132,6 +132,9 @@ def interrupted_line(exc: KeyboardInterrupt, out: str) -> str:
 
     name = getattr(exc, "signum", None)
     name = "SIGINT" if name is None else str(exc)
+    if getattr(exc, "finished", None) is not None:
+        return (f"interrupted ({name}) as the run ended, after {out} was written whole "
+                f"(status: {exc.finished})")
     partial = partial_path(out)
     if partial.exists() and has_checkpoint(partial):
         return (f"interrupted ({name}); {partial} holds a checkpoint: run the same command "

@@ -291,33 +291,47 @@ def run(scene, backend: str = "reference", out=None, progress: bool = False, kee
     detail = any(isinstance(r, H5MDWriter) and r.contacts for r in reps)  # contact series
     clock = CheckpointClock(writer.checkpoint_every if writer is not None else None)
     status, err = "complete", None
-    try:
-        # a signal while a frame goes to the reporters is held until all have it, so that a
-        # checkpoint (the backend's state at its last frame) matches the frames written
-        notice = CompileNotice(f"{scene.name} [{b.name}]") if progress else nullcontext()
-        with notice, FrameSections() as sections:
+    # a signal while a frame goes to the reporters is held until all have it, so that a
+    # checkpoint (the backend's state at its last frame) matches the frames written; one
+    # while the files are closed waits until they are whole
+    notice = CompileNotice(f"{scene.name} [{b.name}]") if progress else nullcontext()
+    with notice, FrameSections() as sections:
+        try:
             for block in b.blocks(resume=resumed.state) if resumed else b.blocks():
                 sections.inside = True
                 _hand_on(block, reps, watch, detail)
                 _checkpoint_if_due(clock, writer, b)
                 sections.leave()
-    except IntegrationError as exc:
-        status, err = f"failed: {exc}", str(exc)
-    except BaseException:
-        _interrupted(reps, writer if clock.every is not None else None, b)
-        raise
-    bound = b.ledger_bound(watch.scale, watch.term_max)
-    status = watch.status(status, bound)
-    b.stats["max_ledger_error_rel"] = watch.max_err
-    b.stats["ledger_bound_rel"] = bound
-    for r in reps:
-        r.close(status)
+        except IntegrationError as exc:
+            status, err = f"failed: {exc}", str(exc)
+        except BaseException:
+            sections.inside = True  # a second signal waits for the checkpoint and the close
+            _interrupted(reps, writer if clock.every is not None else None, b)
+            raise
+        sections.inside = True
+        bound = b.ledger_bound(watch.scale, watch.term_max)
+        status = watch.status(status, bound)
+        b.stats["max_ledger_error_rel"] = watch.max_err
+        b.stats["ledger_bound_rel"] = bound
+        for r in reps:
+            r.close(status)
+        _leave_finished(sections, status)
     result = RunResult(
         trajectory=mem.record(scene, b.name) if mem is not None else None, stats=b.stats,
         status=status, max_ledger_error=watch.max_err, error=err, ledger_bound=bound)
     if err is not None and raise_errors:
         raise IntegrationError(err)
     return result
+
+
+def _leave_finished(sections, status: str) -> None:
+    """Deliver a signal that arrived while the run's files were closed; the
+    :class:`KeyboardInterrupt` it raises carries ``finished = status`` (the files are whole)."""
+    try:
+        sections.leave()
+    except KeyboardInterrupt as exc:
+        exc.finished = status
+        raise
 
 
 def _hand_on(block, reps, watch, detail: bool) -> None:
