@@ -1096,7 +1096,7 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
     if nkick > 0:
         fv_first, fv_l = apply_kicks(at_run_time(flags), params, old, vn, closed, h, t0,
                                      kicked, kick, np.int64(row), np.int64(j0), np.int64(j1),
-                                     nkick, fv_first, fv_l, branch)
+                                     np.int64(nkick), fv_first, fv_l, branch)
     if not walls and j1 == np.uint64(closed.shape[0]):  # the last bead: no contact right
         im, g = bead_factors(flags, params, n - one)
         a, av = bead_accelerations(f_l, fv_l, x_c, ve_c, im, g, flags, params, now)
@@ -1194,13 +1194,15 @@ def verlet_pass(flags, params, old, new, h, t0, ks, run_segments):
         if flags[PULSE]:
             push_pulsed_bead(flags, params, new, h, t0 + h)
         return power
+    first = np.int64(0)  # typed int64, as one_segment's: a literal 0 made numba compile
+    # segment_pass a second time in each variant (~7 s)
     real, ints = segment_pass(flags, params, old, new.x, new.v, new.a, ks.closed,
                               (h, t0, seg.size, seg.flag, seg.ev_real, seg.ev_contact,
-                               seg.kicked, seg.kick, seg.branch, 0, ks.closed.shape[0]),
-                              0)
+                               seg.kicked, seg.kick, seg.branch, first, ks.closed.shape[0]),
+                              first)
     if ints[I_SWITCHES] > 0:
         seg.ints[0, I_SWITCHES] = ints[I_SWITCHES]
-        log_switches(ks, 0)
+        log_switches(ks, first)
     if ints[I_STATUS] != OK:
         fail(ks.counters[0], ints[I_STATUS], ints[I_BAD])
     seg.ints[0, I_FLAGGED] = ints[I_FLAGGED]
@@ -1691,10 +1693,10 @@ def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
     t1 = t0 + dt
     if edge_l >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, lo - 1, fs_l,
-                         j_l - 0.5 * dt * (f0_l + fs_l), False, ks.memo)
+                         j_l - 0.5 * dt * (f0_l + fs_l), np.bool_(False), ks.memo)
     if edge_r >= 0:
         finish_neighbour(flags, params, old, new, ks.closed, dt, t1, hi + 1, fs_r,
-                         j_r - 0.5 * dt * (f0_r + fs_r), True, ks.memo)
+                         j_r - 0.5 * dt * (f0_r + fs_r), np.bool_(True), ks.memo)
     return (0, viscous - 0.5 * dt * (p_start + p_pass), p_state - p_pass,
             work - 0.5 * dt * (e_start + e_state))
 
@@ -1993,7 +1995,7 @@ def advance_steps(flags, params, buffers, ks, nsteps, dt, run_segments, run_lane
         counters.power = p1 + power
         counters.current = 1 - o
         if flags[PULSE] or flags[BASE]:  # the excitations' work, by the same rule
-            pe = external_power(at_run_time(flags), params, new, t0 + dt, 0,
+            pe = external_power(at_run_time(flags), params, new, t0 + dt, np.int64(0),
                                 new.x.shape[0] - 1)
             counters.work += 0.5 * dt * (counters.ext_power + pe) + work
             counters.ext_power = pe
