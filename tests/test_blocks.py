@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from conftest import assert_same_runs
 
+from mdgran.backends.base import CLOSE, OPEN, Event, Events
 from mdgran.model.chain import model_from_scene
 from mdgran.model.scene import load_scene
 from mdgran.simulation import run, worst
@@ -108,3 +109,27 @@ def test_kernel_thread_changes_nothing(monkeypatch, tmp_path, options):
     assert results[0].status == results[1].status
     assert (results[0].status == "complete") == (not options), results[0].status
     assert_same_runs(a, b, tmp_path / "2.h5", tmp_path / "1.h5")
+
+
+event_lists = st.lists(st.builds(
+    Event, st.floats(0.0, 1e3, allow_nan=False), st.integers(1, 10**6),
+    st.sampled_from([CLOSE, OPEN])), max_size=30)
+
+
+@given(event_lists, st.integers(0, 30), st.integers(0, 30))
+def test_events_as_arrays_are_the_list_of_events(events, cut, stop):
+    """Events (the arrays blocks carry) behave as the list of Event s they hold: items,
+    slices, iteration, joining and comparison; and back to the same arrays."""
+    arrays = Events.of(events)
+    assert len(arrays) == len(events) and list(arrays) == events and arrays == events
+    assert [arrays[k] for k in range(len(events))] == events
+    assert list(arrays[cut:stop]) == events[cut:stop]
+    joined = Events.join([events[:cut], arrays[cut:stop], Events.of(events[stop:])])
+    assert joined == events[:cut] + events[cut:stop] + events[stop:]
+    assert list(arrays[:cut] + events[cut:]) == events
+    assert Events.of(list(arrays)).time.tobytes() == arrays.time.tobytes()
+    assert arrays.kind.dtype == np.int8 and arrays.contact.dtype == np.int64
+    if events:
+        other = list(events)
+        other[-1] = Event(other[-1].time, other[-1].contact, 1 - other[-1].kind)
+        assert arrays != other

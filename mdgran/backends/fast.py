@@ -51,7 +51,7 @@ from ..model.contact import ContactTable
 from ..model.contact_scalar import SING_BAND, schwarz_constants
 from ..model.scene import SceneError
 from . import fast_kernel as fk
-from .base import (ALL_FEATURES, CLOSE, OPEN, Backend, Event, Frame, Frames, IntegrationError,
+from .base import (ALL_FEATURES, Backend, Events, Frame, Frames, IntegrationError,
                    check_excitation_steps, steps_per_frame)
 
 EVENT_BUFFER = 65536
@@ -245,7 +245,7 @@ class FastBackend(Backend):
         self._count = {k: self.ks.counters[k] for k in (
             "current", "step", "status", "events", "substeps", "d_viscous", "d_hysteresis",
             "power")}
-        self._pending: list = []
+        self._pending = Events()
         self._last = None
         self._step_seconds = None  # seconds per step of the last call (its step budget)
 
@@ -253,7 +253,7 @@ class FastBackend(Backend):
         """The beads' current state (views of the kernel's buffer)."""
         return self._copies[int(self._count["current"][0])]
 
-    def _take_events(self) -> list:
+    def _take_events(self) -> Events:
         """Every event in the log (sorted by time), which is emptied."""
         k = int(self.counters["events"])
         evs = self._events(0, k)
@@ -261,16 +261,17 @@ class FastBackend(Backend):
         self.stats["events"] += k
         return evs
 
-    def _events(self, lo: int, hi: int) -> list:
-        """Events ``lo .. hi - 1`` of the log, sorted by time (stable: step-quantized events
-        come per step, by contact)."""
+    def _events(self, lo: int, hi: int, frame=None) -> Events:
+        """Events ``lo .. hi - 1`` of the log (copies), sorted by time (stable: step-quantized
+        events come per step, by contact); with ``frame`` (each one's frame, ascending), by
+        time within each frame."""
         if hi <= lo:
-            return []
+            return Events()
         log = self.ks.log
-        order = lo + np.argsort(log.time[lo:hi], kind="stable")
-        return [Event(t, c, CLOSE if k == 1 else OPEN) for t, c, k in zip(
-            log.time[order].tolist(), self.model.contact_numbers[log.contact[order]].tolist(),
-            log.kind[order].tolist())]
+        t = log.time[lo:hi]
+        order = lo + (np.argsort(t, kind="stable") if frame is None else np.lexsort((t, frame)))
+        return Events(log.time[order], self.model.contact_numbers[log.contact[order]],
+                      log.kind[order])
 
     def _check(self):
         status = int(self.counters["status"])
@@ -405,12 +406,11 @@ class FastBackend(Backend):
         first; each frame's sorted by time), how many of them belong to frames ``0 .. k``
         (``[done]``), and the log's count of events up to the last frame."""
         ends = block.counts[:done, 0]  # the log's count of events at each frame
-        starts = np.concatenate(([0], ends[:-1]))
-        events, self._pending = self._pending, []  # an earlier call's unfinished frame's
-        first = len(events)
-        for k in np.flatnonzero(ends > starts).tolist():  # the frames with events
-            events += self._events(int(starts[k]), int(ends[k]))
-        return events, ends + first, (int(ends[-1]) if done else 0)
+        count = int(ends[-1]) if done else 0
+        frame = np.repeat(np.arange(done), np.diff(ends, prepend=0))
+        pending, self._pending = self._pending, Events()  # an earlier call's unfinished
+        # frame's
+        return Events.join((pending, self._events(0, count, frame))), ends + len(pending), count
 
     def _call(self, kernel_args, i, nframes):
         """One call of the compiled loop: frames ``i .. i + nframes - 1`` (fewer if it stops

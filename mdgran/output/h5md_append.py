@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backends.base import Events
 from ..rest_blocks import sparse_width, write_blocks
 
 
@@ -36,13 +37,14 @@ def append_rows(path: str, series: dict, steps, times, values, digest=None, with
                 digest.update(f"{path}/{key}", data, ds.dtype)
 
 
-def append_events(datasets: dict, events: list, digest=None):
-    """Append ``events`` (:class:`~mdgran.backends.base.Event` s) to the ``/events``
-    ``datasets`` (``{"time", "contact", "kind"}``)."""
+def append_events(datasets: dict, events, digest=None):
+    """Append ``events`` (:class:`~mdgran.backends.base.Events`, or a sequence of
+    :class:`~mdgran.backends.base.Event` s) to the ``/events`` ``datasets`` (``{"time",
+    "contact", "kind"}``)."""
+    events = Events.of(events)
     k0 = datasets["time"].shape[0]
-    for key, vals in (("time", [e.time for e in events]),
-                      ("contact", [e.contact for e in events]),
-                      ("kind", [e.kind for e in events])):
+    for key in ("time", "contact", "kind"):
+        vals = getattr(events, key)
         ds = datasets[key]
         ds.resize(k0 + len(events), axis=0)
         ds[k0:] = vals

@@ -14,6 +14,7 @@ import numpy as np
 from . import checkpoint
 from . import h5md_layout as layout
 from .h5md_append import append_events, append_rows
+from ..backends.base import Events
 from ..model.chain import touching_contacts
 from .h5md_layout import CONTACT_SERIES, COMPRESSION, H5_LIBVER
 from ..rest_blocks import gather_rows
@@ -87,7 +88,8 @@ class H5MDWriter:
         self.f = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.lock = OutputLock(self.path)
-        # (step, time, x, v, ledger, per-contact series, moved) of each block not yet written
+        # (step, time, x, v, ledger, per-contact series, moved) of each block not yet written,
+        # and its events (Events)
         self._buf, self._buffered, self._events = [], 0, []
         self._frames, self._last_step = 0, None
         # running checksums of the written rows, for checkpoints only (at 1e6 beads hashing
@@ -180,7 +182,7 @@ class H5MDWriter:
         self._buf.append((block.step, block.time, x, v, block.ledger(), per_contact,
                           getattr(block, "moved", None)))
         self._buffered += len(block)
-        self._events.extend(block.events)
+        self._events.append(block.events)
         self._last_step = int(block.step[-1])
         if self._buffered >= self._block:
             self._guard(self._flush)
@@ -243,9 +245,9 @@ class H5MDWriter:
                                 self._digest, contacts if name == "closed" else None)
             self._frames += self._buffered
             self._buf, self._buffered = [], 0
-        if self._events:
-            append_events(self._ev, self._events, self._digest)
-            self._events = []
+        events, self._events = Events.join(self._events), []
+        if len(events):
+            append_events(self._ev, events, self._digest)
 
     def close(self, status):
         """Finish the file: rename it onto the requested name unless interrupted (then keep

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backends.base import Events
 from .run_record import LEDGER_NAMES, Run
 
 
@@ -35,13 +36,11 @@ class MemoryReporter:
             return np.concatenate(parts).astype(dtype, copy=False) if parts else np.array(
                 [], dtype=dtype)
 
-        ev = [e for b in blocks for e in b.events]
+        ev = Events.join([b.events for b in blocks])
         return Run(
             time=joined("time"), x=joined("x"), v=joined("v"),
             ledger={k: np.concatenate([b.ledger()[k] for b in blocks]) if blocks
                     else np.array([]) for k in LEDGER_NAMES},
-            ev_time=np.array([e.time for e in ev], dtype=float),
-            ev_contact=np.array([e.contact for e in ev], dtype=np.int64),
-            ev_kind=np.array([e.kind for e in ev], dtype=np.int8),
+            ev_time=ev.time.copy(), ev_contact=ev.contact.copy(), ev_kind=ev.kind.copy(),
             scene=scene, backend=backend, attrs={"status": self.status},
             closed=joined("closed", bool) if blocks else None)

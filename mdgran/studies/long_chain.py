@@ -29,6 +29,8 @@ import math
 
 import numpy as np
 
+from ..backends.base import OPEN, Events
+
 #: the pulse "reaches" a bead whose largest speed is at least this share of the impulse
 #: velocity v0
 REACH_SHARE = 1e-3
@@ -43,7 +45,7 @@ class PulseTracker:
     def __init__(self, n: int):
         self.peak_v = np.zeros(n)
         self.peak_t = np.full(n, np.nan)
-        self.events = []
+        self.events = []  # each block's Events
         self.last = None
         self.status = None
 
@@ -55,7 +57,7 @@ class PulseTracker:
         better = top > self.peak_v[lo:hi]
         self.peak_v[lo:hi][better] = top[better]
         self.peak_t[lo:hi][better] = np.asarray(block.time)[k[better]]
-        self.events.extend(block.events)
+        self.events.append(block.events)
         j = len(block) - 1
         self.last = (float(block.time[j]), block.x[j], block.v[j], block.closed[j])
 
@@ -90,8 +92,8 @@ def pulse_profile(tracker: PulseTracker, model, v0: float) -> dict:
     energy = bead_energies(model, np.asarray(x), np.asarray(v), np.asarray(closed))
     first = 1 if model.walls else 2  # contact numbers
     snapoffs = np.zeros(model.n_contacts, dtype=np.int64)
-    opened = [e.contact - first for e in tracker.events if e.kind == 0]
-    np.add.at(snapoffs, np.asarray(opened, dtype=np.int64), 1)
+    events = Events.join(tracker.events)
+    np.add.at(snapoffs, events.contact[events.kind == OPEN] - first, 1)
     speed = None
     lo, hi = 4, max(5, reach // 2)  # the pulse's time of flight, away from the struck end
     t = tracker.peak_t[lo:hi]
