@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 #: the files the page reads, in page order, with the function that turns each into Markdown
-SOURCES = ("work_precision.json", "long_chain.json", "active_chains.json", "output_cost.json",
-           "lammps_native.json")
+SOURCES = ("work_precision.json", "long_chain.json", "active_chains.json", "active_paired.json",
+           "output_cost.json", "lammps_native.json")
 
 
 def fmt(value, digits: int = 3) -> str:
@@ -113,6 +113,39 @@ def active_chains(data: dict, name: str) -> str:
         source_line(name, "rows[].ns_per_bead_step_median")])
 
 
+def spread_cell(s: dict) -> str:
+    """A ratio's median with its quartiles and range: ``median (q1-q3; min-max)``."""
+    return (f"{fmt(s['median'])} ({fmt(s['q1'])}-{fmt(s['q3'])}; "
+            f"{fmt(s['min'])}-{fmt(s['max'])})")
+
+
+def active_paired(data: dict, name: str) -> str:
+    """The fast backend's active / moving ratio from blocks timed in pairs, per (N,
+    threads)."""
+    rows = []
+    for r in data["rows"]:
+        if "error" in r:
+            rows.append([fmt(r["n"]), fmt(r["threads"]), "failed", "-", "-", "-", "-"])
+            continue
+        rows.append([fmt(r["n"]), fmt(r["threads"]), fmt(r["pairs"]),
+                     spread_cell(r["active_over_moving_loop"]),
+                     spread_cell(r["active_over_moving_cpu"]),
+                     fmt(r["ns_per_bead_step_moving_median"]),
+                     fmt(r["ns_per_bead_step_active_median"])])
+    temps = data.get("temperatures", {})
+    return "\n\n".join([
+        "The fast backend's active chain (temperature "
+        f"{fmt(temps.get('active'))}) over the same chain with every bead moving "
+        f"({fmt(temps.get('moving'))}), both in one process, their blocks of "
+        f"{fmt(data.get('steps_per_block'))} steps timed in pairs (a slow spell of the "
+        "machine falls on both blocks of a pair): the median ratio of the pairs with their "
+        "quartiles and range, for the compiled loop and for the CPU time of the whole block "
+        "(Python's handling of its events included; both threads on two).",
+        table(["beads", "threads", "pairs", "loop ratio", "CPU ratio",
+               "ns moving", "ns active"], rows),
+        source_line(name, "rows[]")])
+
+
 #: output_cost.json's cases on the long chain: name -> the output keys it sets
 OUTPUT_CASES = {"no_file": "no output file", "full": "(defaults)",
                 "full_gzip": "`output.compression = \"gzip\"`",
@@ -164,6 +197,7 @@ TITLES = {
     "work_precision.json": ("Work and precision", work_precision),
     "long_chain.json": ("A pulse in long chains", long_chain),
     "active_chains.json": ("Cost of contact events in long chains", active_chains),
+    "active_paired.json": ("Active over moving chain, blocks in pairs", active_paired),
     "output_cost.json": ("Cost of the output", output_cost),
     "lammps_native.json": ("LAMMPS's own granular contact", lammps_native),
 }

@@ -46,3 +46,21 @@ def test_work_precision_table_holds_the_files_numbers(tmp_path):
     write = tmp_path / "out" / "performance.md"
     mp.write_page(tmp_path, write)
     assert write.read_text() == page
+
+
+def test_active_paired_table_holds_the_files_numbers(tmp_path):
+    mp = load_script()
+    spread = {"median": 1.2345, "q1": 1.2, "q3": 1.3, "min": 1.1, "max": 1.4, "count": 12}
+    data = {"steps_per_block": 800, "temperatures": {"moving": 1e-6, "active": 2.0},
+            "rows": [{"n": 1000000, "threads": 1, "pairs": 12,
+                      "active_over_moving_loop": spread,
+                      "active_over_moving_cpu": {**spread, "median": 1.25},
+                      "ns_per_bead_step_moving_median": 8.5,
+                      "ns_per_bead_step_active_median": 10.5},
+                     {"n": 100000, "threads": 2, "error": "not finished in 1200 s"}]}
+    (tmp_path / "active_paired.json").write_text(json.dumps(data))
+    page = mp.page(tmp_path)
+    assert ("| 1 000 000 | 1 | 12 | 1.23 (1.20-1.30; 1.10-1.40) | 1.25 (1.20-1.30; 1.10-1.40) "
+            "| 8.50 | 10.5 |") in page
+    assert "| 100 000 | 2 | failed |" in page
+    assert "*Source: `benchmarks/results/active_paired.json`, key `rows[]`.*" in page
