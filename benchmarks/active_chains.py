@@ -66,7 +66,9 @@ def fast_worker(n, temperature, threads, steps, repeats):
     """The fast backend: each frame is one block of ``steps`` steps."""
     from mdgran.backends.fast import FastBackend
 
-    b = FastBackend(scene_for(n, temperature, steps, repeats + 1), threads=threads)
+    # one block more than is timed: each timed next() then steps one block (the backend steps
+    # the next block, in line or on a second core, before it hands over the last)
+    b = FastBackend(scene_for(n, temperature, steps, repeats + 2), threads=threads)
     frames = b.blocks()
     next(frames)  # t = 0
     next(frames)  # warm-up block
