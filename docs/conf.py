@@ -75,6 +75,8 @@ nitpick_ignore = [
     ("py:data", "LEDGER_NAMES"),  # run_record's ledger terms, listed in Run's docstring
     ("py:func", "_derive_beads"), ("py:func", "run_segments"),  # private; a compiled kernel
     ("py:class", "tqdm.std.tqdm"),  # progress.Line's base class, a library's (no intersphinx)
+    ("py:class", "collections.abc.Sequence"),  # base.Events's base class, the standard
+    # library's (no intersphinx)
 ]  # a class's "Attributes:" as fields, not as a second description
 
 # ``mdgran.run`` and friends are documented where they are defined (``mdgran.api.run``); a

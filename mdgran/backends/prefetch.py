@@ -1,7 +1,8 @@
 """A cache hint for the compiled kernels: ``prefetch_row(a, i)`` asks the processor to bring
 row ``i`` of array ``a`` into its caches and returns at once (LLVM's ``llvm.prefetch``; no
 result changes, only when the row's memory is read).  For rows read later whose index is
-known early, far apart in a long chain: a kicked contact's memo row (:mod:`.fast_kernel`)."""
+known early, far apart in a long chain: a kicked contact's memo row
+(:mod:`mdgran.backends.fast_kernel`)."""
 from __future__ import annotations
 
 from llvmlite import ir
