@@ -12,8 +12,8 @@ the backend's business.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Iterator
 
 import numpy as np
