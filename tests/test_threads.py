@@ -9,13 +9,19 @@ may run on any thread, and their results are joined in segment order.  What must
   step (stepped in lanes on the threads);
 * the segment size changes nothing but the order in which the damping power is summed:
   positions, velocities, states and events are bitwise those of the one-segment (serial)
-  pass, and ``D_viscous`` agrees to round-off.
+  pass, and ``D_viscous`` agrees to round-off;
+* the threads take segments and lanes from one shared counter (``backends.atomic``): every
+  item is taken exactly once, whatever the count, the claim size and the threads.
 """
+import numba
 import numpy as np
 import pytest
+from numba import njit, prange
 from hypothesis import given, settings, strategies as st
 
 from mdgran.backends import fast_kernel as fk
+from mdgran.backends.atomic import fetch_add
+from mdgran.backends.fast import note_threads_ran
 from mdgran.model.scene import load_scene
 from mdgran.simulation import run
 
@@ -146,3 +152,31 @@ def test_a_process_forked_after_threads_runs_on_one():
     assert c_status == "complete"
     assert c_threads == (1 if threading_layer() == "omp" else 2)
     assert np.array_equal(c_x, x)
+
+
+@njit(parallel=True)
+def _claim_all(counter, taken, chunk, threads):
+    """Items 0 .. len(taken) - 1 claimed ``chunk`` at a time from ``counter[0]`` by
+    ``threads`` loops on numba's threads, as the pass claims its segments."""
+    counter[0] = 0
+    for _ in prange(threads):
+        s = fetch_add(counter, 0, chunk)
+        while s < taken.size:
+            for k in range(s, min(s + chunk, taken.size)):
+                taken[k] += 1
+            s = fetch_add(counter, 0, chunk)
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(0, 200_000), chunk=st.integers(1, 64), threads=st.integers(1, 4))
+def test_threads_claiming_from_one_counter_take_each_item_once(n, chunk, threads):
+    """Each item is taken once in each of 20 rounds, and the counter ends at the claims
+    made: one per chunk, and one more per loop that found nothing left (a lost update of
+    the counter would take an item twice or leave the count short)."""
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    counter, taken = np.zeros(1, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    for _ in range(20):
+        _claim_all(counter, taken, chunk, threads)
+        assert counter[0] == (-(-n // chunk) + threads) * chunk
+    note_threads_ran()
+    assert np.all(taken == 20)

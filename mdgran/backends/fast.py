@@ -423,6 +423,7 @@ class FastBackend(Backend):
         k0 = _time.perf_counter()
         if self.flags.threaded:
             numba.set_num_threads(self.threads)
+            self.ks.sharing[fk.SHARE_THREADS] = self.threads
         done = self.advance(*kernel_args, fk.plain(block), i, nframes, self.steps_per_frame,
                             self.dt)
         if self.flags.threaded:

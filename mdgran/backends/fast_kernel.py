@@ -71,8 +71,10 @@ hands back its damping power, the forces of its first and last contacts, the con
 flagged and its step-quantized switches; :func:`merge_segments` then finishes the bead at
 each edge from those two forces (the same operations) and joins the rest in segment order.
 A threaded variant (``Flags.threaded``) runs the segments on numba's threads
-(``prange``); since the cut depends on the chain alone, the result does not depend on the
-thread count, bitwise.  Against one segment (a chain of at most SEGMENT contacts is one),
+(``prange``), each thread taking the next few from a shared counter (:data:`KernelState`'s
+``sharing``, :mod:`mdgran.backends.atomic`) until none is left; since the cut depends on the
+chain alone, the result does not depend on the thread count or on which thread ran which
+segment, bitwise.  Against one segment (a chain of at most SEGMENT contacts is one),
 only the damping power is summed in another order: positions, velocities, states and events
 are bitwise the same, ``D_viscous`` agrees to round-off.  The event windows are stepped in
 lanes after the pass, on the threads too when a step has many (:func:`local_events`).
@@ -101,6 +103,7 @@ from numba import njit, prange
 from ..model.contact_scalar import (SchwarzConstants, branch_t, branch_t4, law_energy, law_force,
                                     schwarz_mean_force_of_branch,
                                     spline_cubic)
+from .atomic import fetch_add
 from .prefetch import prefetch_row
 
 # status codes (counters.status)
@@ -329,6 +332,11 @@ LANES = 8
 #: a threaded variant steps its lanes on the threads when a step has at least this many
 #: windows (waking them costs ~10 us)
 PARALLEL_WINDOWS = 16
+#: a threaded pass's threads take its segments from a shared counter this many claims a
+#: thread at a time (:func:`segment_chunk`)
+CLAIMS_PER_THREAD = 64
+#: Entries of KernelState.sharing: the next segment and the next lane to take, the threads.
+SHARE_SEGMENT, SHARE_LANE, SHARE_THREADS = range(3)
 
 
 class Lanes(NamedTuple):
@@ -366,6 +374,9 @@ class KernelState(NamedTuple):
     windows: np.ndarray  # [m, 10] int64 the event windows of a step (columns W_*)
     window_sums: np.ndarray  # [m, 4] their sums (columns S_*)
     lanes: Lanes
+    sharing: np.ndarray  # [3] int64 the threads' work: the next segment and the next lane
+    #                      a thread takes (:func:`~mdgran.backends.atomic.fetch_add`), and
+    #                      the number of threads (SHARE_* columns)
 
 
 class FrameBlock(NamedTuple):
@@ -454,7 +465,7 @@ def new_state(n: int, n_contacts: int, event_capacity: int,
     return KernelState(np.zeros(n_contacts, dtype=np.bool_), counters, new_log(event_capacity),
                        np.zeros((CHAT_CAP, 2), dtype=np.int64), seg, local,
                        np.zeros((rows, 10), dtype=np.int64), np.zeros((rows, 4)),
-                       new_lanes(event_capacity // 2))
+                       new_lanes(event_capacity // 2), np.zeros(3, dtype=np.int64))
 
 
 def new_log(capacity: int, lanes: tuple = ()) -> EventLog:
@@ -2054,6 +2065,15 @@ def advance_frames(flags, params, buffers, ks, block, first, nframes, spf, dt,
     return nframes
 
 
+@njit(inline="always")
+def segment_chunk(count, threads):
+    """How many of a pass's ``count`` segments a thread claims at a time: about
+    :data:`CLAIMS_PER_THREAD` claims a thread (few enough that taking them costs nothing
+    beside the segments, small enough that the threads finish within a claim of each
+    other), at least one."""
+    return max(1, count // (CLAIMS_PER_THREAD * threads))
+
+
 # ---- the entry point ----------------------------------------------------------------------
 # A named tuple crosses from Python into compiled code about 1 us slower than a plain one (numba
 # types it in Python), and the fast backend calls the loop once per block of frames (once per
@@ -2078,7 +2098,7 @@ def named_state(k):
     """:class:`KernelState` from ``plain(ks)``."""
     lanes = k[8]
     return KernelState(k[0], k[1], EventLog(*k[2]), k[3], Segments(*k[4]), Beads(*k[5]), k[6],
-                       k[7], Lanes(lanes[0], EventLog(*lanes[1]), lanes[2], lanes[3]))
+                       k[7], Lanes(lanes[0], EventLog(*lanes[1]), lanes[2], lanes[3]), k[9])
 
 
 _KERNELS: dict = {}
@@ -2166,9 +2186,13 @@ def _make_advance(flags, nrt: bool):
     def run_segments(params, old, new, h, t0, ks):
         """Every segment of a pass (:func:`segment_pass`), on the threads numba has
         (``numba.set_num_threads``) in a threaded variant, in order otherwise, joined by
-        :func:`merge_segments`; returns the damping power at the step's end.  numba's
-        parallel loop takes arrays and numbers from outside, not records: they are taken
-        apart before it and put together again in it."""
+        :func:`merge_segments`; returns the damping power at the step's end.  The threads
+        take the segments a few at a time from ``ks.sharing`` (:func:`segment_chunk`)
+        until none is left, so that a thread whose segments cost more (kicks and flagged
+        contacts are not spread evenly along an active chain) or that the machine slows
+        does not keep the other waiting.  numba's parallel loop takes arrays and numbers
+        from outside, not records: they are taken apart before it and put together again
+        in it."""
         gap, damping, k1, k3, delta_off, delta_max, below, law, table, mix, c_s, drive = params
         l0, l1, l2, l3, l4 = law
         t_coef, t_base, t_scale, t_last, t_step = table
@@ -2186,21 +2210,30 @@ def _make_advance(flags, nrt: bool):
                             (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
                              kick, branch, jlo, jhi), s)
             return merge_segments(literal, params, old, new, h, t0 + h, ks)
-        for s in prange(first, last + 1):
+        sharing = ks.sharing
+        sharing[SHARE_SEGMENT] = first
+        threads = max(sharing[SHARE_THREADS], 1)  # (each claims until none is left)
+        chunk = segment_chunk(last - first + 1, threads)
+        for _ in prange(threads):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
                        ForceTable(t_coef, t_base, t_scale, t_last, t_step),
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
-            one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
-                        (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked, kick,
-                         branch, jlo, jhi), s)
+            s0 = fetch_add(sharing, SHARE_SEGMENT, chunk)
+            while s0 <= last:
+                for s in range(s0, min(s0 + chunk, last + 1)):
+                    one_segment(p, Beads(xo, vo, ao), xn, vn, an, closed,
+                                (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
+                                 kick, branch, jlo, jhi), s)
+                s0 = fetch_add(sharing, SHARE_SEGMENT, chunk)
         return merge_segments(literal, params, old, new, h, t0 + h, ks)
 
     @variant_jit(tag, cache=True, parallel=flags.threaded)
     def run_lanes(params, old, new, t0, dt, ks, count):
         """The lanes' windows still to be stepped (:func:`step_lane`), on the threads numba
-        has in a threaded variant when there are at least :data:`PARALLEL_WINDOWS`, in order
+        has in a threaded variant when there are at least :data:`PARALLEL_WINDOWS` (each
+        thread taking the next lane from ``ks.sharing`` until none is left), in order
         otherwise (the same results).  As in ``run_segments``, the records are taken apart
         before the parallel loop and put together again in it."""
         rt = at_run_time(literal)
@@ -2224,15 +2257,20 @@ def _make_advance(flags, nrt: bool):
         xn, vn, an = new
         closed, counters, chatter, memo, lx, lv, la, windows, sums = shared
         lc, time, contact, kind, loss, switching, lchat = lane_arrays
-        for g in prange(LANES):
+        sharing = ks.sharing
+        sharing[SHARE_LANE] = 0
+        for _ in prange(max(sharing[SHARE_THREADS], 1)):
             p = Params(gap, damping, k1, k3, delta_off, delta_max, below,
                        SchwarzConstants(l0, l1, l2, l3, l4),
                        ForceTable(t_coef, t_base, t_scale, t_last, t_step),
                        Mix(m0, m1, m2, m3, m4, m5, m6), c_s,
                        Drive(d0, d1, d2, d3, d4, d5))
-            step_lane(Flags(*literal), p, Beads(xo, vo, ao), (xn, vn, an),
-                      (closed, counters, chatter, memo, lx, lv, la, windows, sums),
-                      (lc, time, contact, kind, loss, switching, lchat), g, count, t0, dt)
+            g = fetch_add(sharing, SHARE_LANE, 1)
+            while g < LANES:
+                step_lane(Flags(*literal), p, Beads(xo, vo, ao), (xn, vn, an),
+                          (closed, counters, chatter, memo, lx, lv, la, windows, sums),
+                          (lc, time, contact, kind, loss, switching, lchat), g, count, t0, dt)
+                g = fetch_add(sharing, SHARE_LANE, 1)
 
     @variant_jit(tag + ("_counted" if nrt else ""), cache=True, _nrt=nrt, nogil=True)
     def advance(params, buffers, ks, block, first, nframes, spf, dt):
