@@ -2204,7 +2204,8 @@ def _make_advance(flags, nrt: bool):
         size, count, real, ints, flag, ev_real, ev_contact, kicked, kick, branch = ks.seg
         jlo, jhi = ks.counters[0].pass_lo, ks.counters[0].pass_hi
         first, last = ks.counters[0].seg_first, ks.counters[0].seg_last
-        if last - first + 1 < PARALLEL_SEGMENTS:  # a few: in order, no threads to wake
+        if not literal[THREADED] or last - first + 1 < PARALLEL_SEGMENTS:
+            # one thread, or a few segments (no threads to wake): in order
             for s in range(first, last + 1):
                 one_segment(params, old, xn, vn, an, closed,
                             (h, t0, size, real, ints, flag, ev_real, ev_contact, kicked,
