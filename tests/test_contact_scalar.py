@@ -9,9 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mdgran.backends import fast_kernel as fk
+from mdgran.backends.simd import branch_t8
 from mdgran.model.contact import ContactLaw
 from mdgran.model import contact_scalar
-from mdgran.model.contact_scalar import (branch_t, branch_t4, hertz_energy, hertz_force,
+from mdgran.model.contact_scalar import (branch_t, hertz_energy, hertz_force,
                                          law_energy, law_force, schwarz_constants,
                                          schwarz_energy, schwarz_force, schwarz_mean_force)
 
@@ -46,18 +48,40 @@ def test_branch_t_solves_the_branch_equation(law):
     assert branch_t(law.delta_min - 1.0, law.sigma, law.t_min, law.delta_min) == law.t_min
 
 
+OFFSETS = st.one_of(st.floats(-1.0, 0.2), st.floats(0.0, 80.0), st.floats(0.0, 1e-12))
+
+
 @settings(max_examples=200, deadline=None)
 @given(fc=st.floats(-2.0, -1.5), snap=st.sampled_from(["displacement", "force"]),
-       offsets=st.lists(st.one_of(st.floats(-1.0, 0.2), st.floats(0.0, 80.0),
-                                  st.floats(0.0, 1e-12)), min_size=4, max_size=4))
-def test_branch_t4_is_branch_t_bit_for_bit(fc, snap, offsets):
-    """The fast kernel's kicks invert four compressions at once (branch_t4, Newton steps
-    interleaved): each result is branch_t's, bit for bit, on any law between DMT and JKR and
+       offsets=st.lists(OFFSETS, min_size=8, max_size=8))
+def test_branch_t8_is_branch_t_bit_for_bit(fc, snap, offsets):
+    """The fast kernel's kicks invert eight compressions at once in vector instructions
+    (branch_t8): each result is branch_t's, bit for bit, on any law between DMT and JKR and
     at any compression (below delta_min, at it, just above, far above)."""
     law = ContactLaw("schwarz", fc, snap)
-    d = [law.delta_min + o for o in offsets]
-    four = branch_t4(*d, law.sigma, law.t_min, law.delta_min)
-    assert list(four) == [branch_t(x, law.sigma, law.t_min, law.delta_min) for x in d]
+    d = tuple(law.delta_min + o for o in offsets)
+    eight = branch_t8(d, law.sigma, law.t_min, law.delta_min)
+    assert list(eight) == [branch_t(x, law.sigma, law.t_min, law.delta_min) for x in d]
+
+
+@settings(max_examples=100, deadline=None)
+@given(fc=st.floats(-2.0, -1.5), start=st.integers(0, 3),
+       rows=st.lists(st.tuples(OFFSETS, OFFSETS, st.booleans()), max_size=21))
+def test_kick_inversions_are_branch_t_of_each_due_entry(fc, start, rows):
+    """invert_kicks replaces column K_T1 of every kicked row and column K_T0 of the rows
+    marked due by branch_t of what they held (eight at a time, the last group padded), and
+    leaves every other entry as it was."""
+    law = ContactLaw("schwarz", fc)
+    kick = np.full((start + len(rows) + 2, 5), 7.0)
+    for k, (t0, t1, due) in enumerate(rows, start):
+        kick[k, fk.K_T0], kick[k, fk.K_T1] = law.delta_min + t0, law.delta_min + t1
+        kick[k, fk.K_DUE] = float(due)
+    want = kick.copy()
+    for k, (_, _, due) in enumerate(rows, start):
+        for col in (fk.K_T1, fk.K_T0) if due else (fk.K_T1,):
+            want[k, col] = branch_t(kick[k, col], law.sigma, law.t_min, law.delta_min)
+    fk.invert_kicks(schwarz_constants(law), kick, start, len(rows))
+    assert kick.tobytes() == want.tobytes()
 
 
 @pytest.mark.parametrize("law", LAWS[:3], ids=lambda law: str(law.fc))

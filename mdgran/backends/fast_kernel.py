@@ -100,11 +100,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ..model.contact_scalar import (SchwarzConstants, branch_t, branch_t4, law_energy, law_force,
+from ..model.contact_scalar import (SchwarzConstants, branch_t, law_energy, law_force,
                                     schwarz_mean_force_of_branch,
                                     spline_cubic)
 from .atomic import fetch_add
 from .prefetch import prefetch_row
+from .simd import branch_t8
 
 # status codes (counters.status)
 OK, OUT_OF_TABLE, CHATTER, TOO_MANY_SUBSTEPS, EVENTS_FULL, EVENT_OVERFLOW = 0, 1, 2, 3, 4, 5
@@ -873,38 +874,23 @@ def refinish(flags, params, old, vn, h, now, b, fv_l, fv_r):
 
 
 @njit(inline="always")
-def invert4(law, kick, col, a, b, c, d):
-    """Rows a, b, c, d of column ``col`` of ``kick``: compressions replaced by their branch
-    parameters (:func:`branch_t4`; rows may repeat)."""
-    kick[a, col], kick[b, col], kick[c, col], kick[d, col] = branch_t4(
-        kick[a, col], kick[b, col], kick[c, col], kick[d, col], law.sigma, law.t_min,
-        law.delta_min)
-
-
-@njit(inline="always")
-def invert_due(law, kick, col, due, row, count):
-    """Column ``col`` of rows row .. row + count - 1 of ``kick`` (those whose column ``due``
-    is nonzero; all if due < 0): compressions replaced by their branch parameters, four
-    at a time (:func:`invert4`)."""
-    q, a, b, c = 0, 0, 0, 0
+def invert_kicks(law, kick, row, count):
+    """Column K_T1 of rows row .. row + count - 1 of ``kick`` eight rows at a time in vector
+    instructions (:func:`mdgran.backends.simd.branch_t8`; the last eight padded with the last
+    row), and column K_T0 of the rows whose K_DUE is nonzero one by one (a kicked contact's
+    start is mostly in its memo): compressions replaced by their branch parameters."""
+    last = row + count - 1
+    for k in range(row, row + count, 8):
+        r = (k, min(k + 1, last), min(k + 2, last), min(k + 3, last), min(k + 4, last),
+             min(k + 5, last), min(k + 6, last), min(k + 7, last))
+        t = branch_t8((kick[r[0], K_T1], kick[r[1], K_T1], kick[r[2], K_T1], kick[r[3], K_T1],
+                       kick[r[4], K_T1], kick[r[5], K_T1], kick[r[6], K_T1], kick[r[7], K_T1]),
+                      law.sigma, law.t_min, law.delta_min)
+        for i in range(8):
+            kick[r[i], K_T1] = t[i]
     for k in range(row, row + count):
-        if due >= 0 and kick[k, due] == 0.0:
-            continue
-        if q == 3:
-            invert4(law, kick, col, a, b, c, k)
-            q = 0
-            continue
-        if q == 0:
-            a = k
-        elif q == 1:
-            b = k
-        else:
-            c = k
-        q += 1
-    if q > 0:
-        b = b if q > 1 else a
-        c = c if q > 2 else b
-        invert4(law, kick, col, a, b, c, c)
+        if kick[k, K_DUE] != 0.0:
+            kick[k, K_T0] = branch_t(kick[k, K_T0], law.sigma, law.t_min, law.delta_min)
 
 
 @njit(cache=True)
@@ -913,8 +899,9 @@ def kick_branches(flags, params, old, h, kicked, kick, row, count, memo):
     the branch parameters (:func:`branch_t`) of each one's compressions at the start and at
     the end of the pass of length h from ``old`` (in its own units when mixed), by the pass's
     operations; the start's from ``memo`` when it holds it (:func:`memo_mean_force`).  With
-    one law, the inversions four at a time (:func:`branch_t4`: one inversion is a chain of
-    dependent square roots and divisions), and the memo rows, far apart in a long chain, read
+    one law, the end's inversions eight at a time in vector instructions (:func:`invert_kicks`:
+    one inversion is a chain of dependent square roots and divisions), and the memo rows, far
+    apart in a long chain, read
     one after another before any is used (the kicks of an active chain of 1e5 beads took 1.4
     ns a bead-step, one contact after another).  The pass asked for each row when it found
     the contact in the band (``prefetch_row``, :mod:`mdgran.backends.prefetch`): at 1e6 beads
@@ -940,8 +927,7 @@ def kick_branches(flags, params, old, h, kicked, kick, row, count, memo):
             if kick[k, K_DUE] != 0.0:
                 kick[k, K_T0] = branch_t(kick[k, K_T0], law.sigma, law.t_min, law.delta_min)
         return
-    invert_due(params.law, kick, K_T1, -1, row, count)
-    invert_due(params.law, kick, K_T0, K_DUE, row, count)
+    invert_kicks(params.law, kick, row, count)
 
 
 @njit(cache=True)

@@ -122,27 +122,6 @@ def branch_t(delta, sigma, t_min, delta_min):
 
 
 @njit(cache=True)
-def branch_t4(d0, d1, d2, d3, sigma, t_min, delta_min):
-    """:func:`branch_t` of four compressions of one law, bit for bit, their Newton steps
-    interleaved: one inversion is a chain of dependent square roots and divisions, and four
-    independent chains keep the processor's units busy (45 against 75 ns an inversion)."""
-    if t_min == 0.0:
-        return (branch_t(d0, sigma, t_min, delta_min), branch_t(d1, sigma, t_min, delta_min),
-                branch_t(d2, sigma, t_min, delta_min), branch_t(d3, sigma, t_min, delta_min))
-    r0, w0, big = branch_newton_start(d0, t_min, delta_min)
-    r1, w1, _ = branch_newton_start(d1, t_min, delta_min)
-    r2, w2, _ = branch_newton_start(d2, t_min, delta_min)
-    r3, w3, _ = branch_newton_start(d3, t_min, delta_min)
-    for _ in range(NEWTON_STEPS):
-        w0 = branch_newton_step(w0, r0, t_min, big)
-        w1 = branch_newton_step(w1, r1, t_min, big)
-        w2 = branch_newton_step(w2, r2, t_min, big)
-        w3 = branch_newton_step(w3, r3, t_min, big)
-    return (t_min + max(w0, 0.0), t_min + max(w1, 0.0), t_min + max(w2, 0.0),
-            t_min + max(w3, 0.0))
-
-
-@njit(cache=True)
 def schwarz_force_of_cube(t3, fc, sigma):
     """Schwarz force from ``t3 = t^3``: ``f = fc + (t^3 - 3 sigma)^2`` (units eta)."""
     u = t3 - 3.0 * sigma
