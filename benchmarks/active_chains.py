@@ -22,6 +22,16 @@ process; rank 0's for ``native``), the events in the timed blocks, and the event
 stepped (``fast``). ``os.getloadavg()`` before and after each point says whether the two cores
 were idle.
 
+A fast backend's moving (T = 1e-6) and active (T = 2) chains run as a pair, in one process,
+their blocks alternating (:func:`paired_worker`): blocks of ``--pair-time`` (100 steps by
+default; at least the backend's 1e6 bead-steps, 1000 steps at N = 1e3) over the same stretch
+of history as the other points (t = 2 to 8 by default), so that a pair's two blocks run within
+seconds of each other and a slow spell of the machine (this one has them, up to 1.5x, lasting
+seconds to minutes) mostly falls on both. Their active-over-moving ratio is the median of all
+pairs' ratios, with a distribution-free 95 % interval, quartiles and each round's median. A
+native backend's ratio, and two threads or ranks over one, is the median of the rounds'
+ratios (within a round the points of one N and backend run one after another).
+
 Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
 Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at every
@@ -83,6 +93,45 @@ def fast_worker(n, temperature, threads, steps, repeats):
             "threads": b.stats["threads"], "rss_MB": _rss()}
 
 
+def paired_worker(n, threads, steps, repeats, warm_up):
+    """The fast backend's moving (T = 1e-6) and active (T = 2) chains in one process, their
+    blocks of ``steps`` alternating after ``warm_up`` blocks of each (the moving chain's first
+    in even pairs, the active chain's in odd ones), so that each pair's two blocks run within
+    seconds of each other.  On one thread the process is pinned to one core: the backend then
+    steps each block in line (it would otherwise step a chain's next block on the second core
+    while the other chain's block is timed).  Per temperature (as a string): the compiled
+    loop's wall time of each block (``loop_s``), the wall and CPU time of each whole
+    ``next()`` (``wall_s``, ``cpu_s``), the events and event windows of the timed blocks."""
+    from mdgran.backends.fast import FastBackend
+
+    if threads == 1 and hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    # one block more than is timed: each timed next() then steps one block
+    backends = {t: FastBackend(scene_for(n, t, steps, repeats + warm_up + 1), threads=threads)
+                for t in (QUIET, ACTIVE)}
+    frames = {t: b.blocks() for t, b in backends.items()}
+    for t in (QUIET, ACTIVE):
+        for _ in range(1 + warm_up):  # t = 0, then the warm-up blocks
+            next(frames[t])
+    loop, wall, cpu = ({QUIET: [], ACTIVE: []} for _ in range(3))
+    start = {t: (b.stats["events"], b.stats["event_windows"]) for t, b in backends.items()}
+    for k in range(repeats):
+        for t in ((QUIET, ACTIVE) if k % 2 == 0 else (ACTIVE, QUIET)):
+            b = backends[t]
+            k0, w0, c0 = b.stats["kernel_s"], time.perf_counter(), time.process_time()
+            next(frames[t])
+            loop[t].append(b.stats["kernel_s"] - k0)
+            wall[t].append(time.perf_counter() - w0)
+            cpu[t].append(time.process_time() - c0)
+    return {"loop_s": {str(t): v for t, v in loop.items()},
+            "wall_s": {str(t): v for t, v in wall.items()},
+            "cpu_s": {str(t): v for t, v in cpu.items()},
+            "events": {str(t): b.stats["events"] - start[t][0] for t, b in backends.items()},
+            "event_windows": {str(t): b.stats["event_windows"] - start[t][1]
+                              for t, b in backends.items()},
+            "threads": backends[ACTIVE].stats["threads"]}
+
+
 def native_worker(n, temperature, steps, repeats):
     """``fix mdgran/chain`` with located events: LAMMPS's ``run`` of ``steps`` steps."""
     from mdgran.backends.lammps import LammpsBackend
@@ -114,7 +163,10 @@ def _rss():
 
 def worker(args):
     n, temperature, steps = args.worker, args.temperature, args.steps
-    if args.backend.startswith("fast"):
+    if args.pair:
+        report = paired_worker(n, int(args.backend[-1]), steps, args.repeats, args.warm_up)
+        report["rank"], report["rss_MB"] = 0, _rss()
+    elif args.backend.startswith("fast"):
         report = fast_worker(n, temperature, int(args.backend[-1]), steps, args.repeats)
         report["rank"] = 0
     else:
@@ -123,30 +175,40 @@ def worker(args):
 
 
 # ---- the driver -----------------------------------------------------------------------------
-def measure(n, temperature, backend, repeats, block_time, timeout):
-    steps = int(round(block_time / DT))
+def run_worker(n, backend, options, timeout):
+    """Run a worker process (``mpiexec -n 2`` for native-2) with the options ``options``;
+    returns its ranks' reports, or an error message (a string)."""
     ranks = 2 if backend == "native-2" else 1
-    row = {"n": n, "temperature": temperature, "backend": backend, "steps_per_block": steps,
-           "repeats": repeats, "loadavg_before": os.getloadavg()}
     # one BLAS thread: an idle OpenBLAS thread spinning after numpy's set-up is CPU time
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, __file__, "--worker", str(n), "--temperature", str(temperature),
-               "--backend", backend, "--steps", str(steps), "--repeats", str(repeats),
-               "--report-dir", tmp]
+        cmd = [sys.executable, __file__, "--worker", str(n), "--backend", backend,
+               "--report-dir", tmp] + options
         if ranks > 1:
             cmd = [mpiexec, "-n", str(ranks)] + cmd
         try:
             res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout,
                                  start_new_session=True)
         except subprocess.TimeoutExpired:
-            return {**row, "error": f"not finished in {timeout} s"}
+            return f"not finished in {timeout} s"
         reports = sorted((json.loads(p.read_text()) for p in Path(tmp).glob("rank-*.json")),
                          key=lambda r: r["rank"])
-    row["loadavg_after"] = os.getloadavg()
     if res.returncode or len(reports) != ranks:
-        return {**row, "error": (res.stderr or res.stdout)[-600:]}
+        return (res.stderr or res.stdout)[-600:]
+    return reports
+
+
+def measure(n, temperature, backend, repeats, block_time, timeout):
+    """One point in a process of its own: its blocks' ns per bead-step and CPU time."""
+    steps = int(round(block_time / DT))
+    row = {"n": n, "temperature": temperature, "backend": backend, "steps_per_block": steps,
+           "repeats": repeats, "loadavg_before": os.getloadavg()}
+    reports = run_worker(n, backend, ["--temperature", str(temperature), "--steps", str(steps),
+                                      "--repeats", str(repeats)], timeout)
+    row["loadavg_after"] = os.getloadavg()
+    if isinstance(reports, str):
+        return {**row, "error": reports}
     r0 = reports[0]
     row.update({"ns_blocks": [1e9 * w / (n * steps) for w in r0["wall_s"]],
                 "cpu_ns_per_bead_step": 1e9 * sum(r0["cpu_s"]) / (n * steps * repeats),
@@ -155,6 +217,38 @@ def measure(n, temperature, backend, repeats, block_time, timeout):
         if key in r0:
             row[key] = r0[key]
     return row
+
+
+def measure_pair(n, backend, pairs, pair_time, warm_up_time, timeout):
+    """The moving and the active chain of a fast backend in one process, their blocks of
+    ``pair_time`` alternating (:func:`paired_worker`): a row of each, the active one with the
+    ratio of each pair's blocks (``pair_ratios``).  A block is at least the backend's
+    ``BLOCK_BEAD_STEPS`` (it hands over no less; 1000 steps at N = 1e3), ``pairs`` blocks of
+    ``pair_time`` at most (the same stretch of history)."""
+    from mdgran.backends.fast import BLOCK_BEAD_STEPS
+
+    steps = max(int(round(pair_time / DT)), -(-BLOCK_BEAD_STEPS // n))
+    pairs = max(2, int(round(pairs * pair_time / (steps * DT))))
+    warm_up = max(1, int(round(warm_up_time / (steps * DT))))
+    base = {"n": n, "backend": backend, "steps_per_block": steps, "repeats": pairs,
+            "paired": True, "loadavg_before": os.getloadavg()}
+    reports = run_worker(n, backend, ["--pair", "--steps", str(steps), "--repeats", str(pairs),
+                                      "--warm-up", str(warm_up)], timeout)
+    base["loadavg_after"] = os.getloadavg()
+    if isinstance(reports, str):
+        return {t: {**base, "temperature": t, "error": reports} for t in (QUIET, ACTIVE)}
+    r0 = reports[0]
+    rows = {}
+    for t in (QUIET, ACTIVE):
+        loop, cpu = r0["loop_s"][str(t)], r0["cpu_s"][str(t)]
+        rows[t] = {**base, "temperature": t,
+                   "ns_blocks": [1e9 * w / (n * steps) for w in loop],
+                   "cpu_ns_per_bead_step": 1e9 * sum(cpu) / (n * steps * pairs),
+                   "peak_rss_MB_per_rank": [r0["rss_MB"]], "events": r0["events"][str(t)],
+                   "event_windows": r0["event_windows"][str(t)], "threads": r0["threads"]}
+    rows[ACTIVE]["pair_ratios"] = [a / q for a, q in zip(r0["loop_s"][str(ACTIVE)],
+                                                         r0["loop_s"][str(QUIET)])]
+    return rows
 
 
 def pooled(rounds):
@@ -166,7 +260,10 @@ def pooled(rounds):
         return bad[0]
     ns = np.concatenate([r["ns_blocks"] for r in rounds])
     row = {k: v for k, v in rounds[0].items() if k not in ("ns_blocks", "loadavg_before",
-                                                            "loadavg_after")}
+                                                            "loadavg_after", "pair_ratios")}
+    if "pair_ratios" in rounds[0]:
+        row["pair_ratios"] = [x for r in rounds for x in r["pair_ratios"]]
+        row["pair_ratio_round_medians"] = [float(np.median(r["pair_ratios"])) for r in rounds]
     row.update({"rounds": len(rounds),
                 "loadavg_before": [r["loadavg_before"] for r in rounds],
                 "loadavg_after": [r["loadavg_after"] for r in rounds],
@@ -185,24 +282,55 @@ def round_medians(row):
     return row.get("ns_per_bead_step_round_medians", [row["ns_per_bead_step_median"]])
 
 
+def median_ci95(values):
+    """The median of ``values`` with a distribution-free 95 % interval: the order statistics
+    of ranks n/2 -+ 0.98 sqrt(n) (the binomial(n, 1/2) quantiles, normal approximation)."""
+    v = np.sort(np.asarray(values, dtype=float))
+    half = 0.98 * np.sqrt(v.size)
+    lo = max(int(np.floor(v.size / 2 - half)), 0)
+    hi = min(int(np.ceil(v.size / 2 + half)), v.size - 1)
+    return float(np.median(v)), [float(v[lo]), float(v[hi])]
+
+
+def pair_ratio(row):
+    """Active over moving from a paired row's pairs (:func:`measure_pair`): the median of all
+    pairs' ratios, its 95 % interval, quartiles, the median of each round's pairs."""
+    median, ci = median_ci95(row["pair_ratios"])
+    q1, q3 = np.percentile(row["pair_ratios"], [25, 75])
+    return {"backend": row["backend"], "n": row["n"], "active_over_quiet": median,
+            "ci95": ci, "quartiles": [float(q1), float(q3)], "pairs": len(row["pair_ratios"]),
+            "rounds": row["pair_ratio_round_medians"]}
+
+
+def round_ratio(num, den):
+    """The ratio of two rows as the median of their rounds' ratios (each round measures the
+    two points within a minute of each other, so that a slow spell of the machine mostly falls
+    on both), with the rounds' ratios."""
+    each = [a / b for a, b in zip(round_medians(num), round_medians(den))]
+    return float(np.median(each)), each
+
+
 def ratios(rows):
-    """Active (T = 2) / quiet stepped whole (T = 1e-6) per (backend, N), and 2 / 1 (threads
-    or ranks) per (N, T), from the medians (the rows hold their spreads)."""
+    """Active (T = 2) / quiet stepped whole (T = 1e-6) per (backend, N): of the pairs
+    (:func:`pair_ratio`) for a fast backend, else the median of the rounds' ratios
+    (:func:`round_ratio`); and 2 / 1 (threads or ranks) per (N, T), the median of the rounds'
+    ratios."""
     done = {(r["backend"], r["n"], r["temperature"]): r for r in rows if "error" not in r}
     out = []
     for (backend, n, t), r in sorted(done.items()):
         quiet = done.get((backend, n, QUIET))
-        if t == ACTIVE and quiet is not None:
-            out.append({"backend": backend, "n": n, "active_over_quiet":
-                        r["ns_per_bead_step_median"] / quiet["ns_per_bead_step_median"],
-                        "rounds": [a / q for a, q in zip(round_medians(r),
-                                                         round_medians(quiet))]})
+        if t == ACTIVE and "pair_ratios" in r:
+            out.append(pair_ratio(r))
+        elif t == ACTIVE and quiet is not None:
+            ratio, each = round_ratio(r, quiet)
+            out.append({"backend": backend, "n": n, "active_over_quiet": ratio,
+                        "rounds": each})
         if backend.endswith("-2"):
             one = done.get((backend[:-1] + "1", n, t))
             if one is not None:
+                ratio, each = round_ratio(one, r)
                 out.append({"backend": backend[:-2], "n": n, "temperature": t,
-                            "two_over_one_speed": one["ns_per_bead_step_median"]
-                            / r["ns_per_bead_step_median"]})
+                            "two_over_one_speed": ratio, "rounds": each})
     return out
 
 
@@ -221,16 +349,20 @@ def main(argv=None):
     ap.add_argument("--temperatures", type=float, nargs="+", default=[0.0, QUIET, ACTIVE])
     ap.add_argument("--backends", nargs="+", default=list(BACKENDS), choices=BACKENDS)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--rounds", type=int, default=2,
+    ap.add_argument("--rounds", type=int, default=4,
                     help="times the whole matrix is measured, every other time in reverse order")
     ap.add_argument("--block-time", type=float, default=2.0,
                     help="time units per timed block (800 steps at dt = 0.0025)")
+    ap.add_argument("--pair-time", type=float, default=0.25,
+                    help="time units per block of a fast pair (100 steps at dt = 0.0025)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per point")
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--temperature", type=float, default=0.0, help=argparse.SUPPRESS)
     ap.add_argument("--backend", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--steps", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--pair", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--warm-up", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--report-dir", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -238,12 +370,22 @@ def main(argv=None):
     points = [(int(float(s)), backend, t) for s in args.sizes.split(",")
               for backend in args.backends for t in args.temperatures]
     measured = {p: [] for p in points}
+    paired = {QUIET, ACTIVE} <= set(args.temperatures)
+    # a fast backend's moving and active chains: one point, their blocks in pairs
+    runs = [(n, b, "pair" if paired and b.startswith("fast") and t == QUIET else t)
+            for n, b, t in points if not (paired and b.startswith("fast") and t == ACTIVE)]
+    pairs = int(round(args.repeats * args.block_time / args.pair_time))
     for turn in range(args.rounds):
-        for n, backend, t in points if turn % 2 == 0 else points[::-1]:
-            row = measure(n, t, backend, args.repeats, args.block_time, args.timeout)
-            measured[n, backend, t].append(row)
-            print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
-                  flush=True)
+        for n, backend, t in runs if turn % 2 == 0 else runs[::-1]:
+            if t == "pair":
+                got = measure_pair(n, backend, pairs, args.pair_time, args.block_time,
+                                   args.timeout)
+            else:
+                got = {t: measure(n, t, backend, args.repeats, args.block_time, args.timeout)}
+            for t, row in got.items():
+                measured[n, backend, t].append(row)
+                print(json.dumps({k: row[k] for k in row if not k.startswith("loadavg")}),
+                      flush=True)
     rows = [pooled(measured[p]) for p in points]
     rows = kept_rows(Path(args.out), rows) + rows
     result = {"benchmark": __doc__.splitlines()[0], "dt": DT,

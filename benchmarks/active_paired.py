@@ -5,12 +5,14 @@
 
 The same chains as ``benchmarks/active_chains.py`` (micro-star's physics with ``chain.n = N``,
 struck at bead 1; the moving chain at T = 1e-6, the active one at T = 2, ``thermal.seed = 1``,
-blocks of 800 steps at dt = 0.0025), but both chains live in one process and their blocks
-alternate: after a warm-up block of each, ``--repeats`` pairs of blocks, the moving chain's
-first in even pairs and the active chain's first in odd ones.  A pair's two blocks run within
-seconds of each other, so a slow spell of the machine (this one has them, lasting seconds to
+by default the same stretch of their history, t = 2 to 8, after 2 time units of warm-up), but
+both chains live in one process and their blocks alternate: ``--repeats`` pairs of blocks of
+``--block-time`` (100 steps at dt = 0.0025 by default), the moving chain's first in even pairs
+and the active chain's first in odd ones. A pair's two blocks run within two seconds of each
+other (at 1e6 beads), so a slow spell of the machine (this one has them, lasting seconds to
 minutes, up to 1.5x) mostly falls on both: the ratio of a pair is far steadier than the ratio
-of two medians taken minutes apart.  Each round is a process of its own (``--rounds``).
+of two medians taken minutes apart, and the shorter the blocks, the fewer pairs a spell's start
+or end cuts. Each round is a process of its own (``--rounds``).
 
 A pair's ratios, active over moving: of the compiled loop's wall time (``loop``,
 ``stats["kernel_s"]``, as active_chains.py reports), and of the wall and the CPU time of the
@@ -21,7 +23,7 @@ the next block on a second core while the other chain's block is timed).  Report
 threads): the median of the pairs' ratios with their min, quartiles and max, each chain's
 median ns per bead-step of the loop, the events per active block, and the load averages
 before and after each round.
-Target (issue 30): the active chain within 1.3x of the moving one.  Writes
+Target: the active chain within 1.3x of the moving one.  Writes
 benchmarks/results/active_paired.json (``--out``).
 """
 from __future__ import annotations
@@ -39,50 +41,21 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from active_chains import ACTIVE, DT, QUIET, scene_for  # noqa: E402
+from active_chains import ACTIVE, DT, QUIET, median_ci95, paired_worker  # noqa: E402
 
 OUT = HERE / "results" / "active_paired.json"
 
 
-def worker(n: int, threads: int, steps: int, repeats: int) -> dict:
-    """Both chains in this process, blocks alternating (module docstring)."""
-    from mdgran.backends.fast import FastBackend
-
-    if threads == 1 and hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    # one block more than is timed: each timed next() then steps one block (the backend
-    # steps the next block before it hands over the last, on one thread here)
-    backends = {t: FastBackend(scene_for(n, t, steps, repeats + 2), threads=threads)
-                for t in (QUIET, ACTIVE)}
-    frames = {t: b.blocks() for t, b in backends.items()}
-    for t in (QUIET, ACTIVE):
-        next(frames[t])  # t = 0
-        next(frames[t])  # warm-up block
-    loop, wall, cpu = ({QUIET: [], ACTIVE: []} for _ in range(3))
-    events0 = backends[ACTIVE].stats["events"]
-    for k in range(repeats):
-        for t in ((QUIET, ACTIVE) if k % 2 == 0 else (ACTIVE, QUIET)):
-            b = backends[t]
-            k0, w0, c0 = b.stats["kernel_s"], time.perf_counter(), time.process_time()
-            next(frames[t])
-            loop[t].append(b.stats["kernel_s"] - k0)
-            wall[t].append(time.perf_counter() - w0)
-            cpu[t].append(time.process_time() - c0)
-    return {"loop_s": {str(t): v for t, v in loop.items()},
-            "wall_s": {str(t): v for t, v in wall.items()},
-            "cpu_s": {str(t): v for t, v in cpu.items()},
-            "active_events": backends[ACTIVE].stats["events"] - events0,
-            "threads": backends[ACTIVE].stats["threads"]}
-
-
-def measure(n: int, threads: int, steps: int, repeats: int, timeout: float) -> dict:
+def measure(n: int, threads: int, steps: int, repeats: int, warm_up: int,
+            timeout: float) -> dict:
     """One round: a worker process; its pairs' ratios and blocks."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp, "report.json")
         cmd = [sys.executable, __file__, "--worker", str(n), "--threads", str(threads),
-               "--steps", str(steps), "--repeats", str(repeats), "--report", str(out)]
+               "--steps", str(steps), "--repeats", str(repeats), "--warm-up", str(warm_up),
+               "--report", str(out)]
         try:
             res = subprocess.run(cmd, capture_output=True, text=True, env=env,
                                  timeout=timeout, start_new_session=True)
@@ -101,17 +74,18 @@ def measure(n: int, threads: int, steps: int, repeats: int, timeout: float) -> d
             "cpu_ratio": ratios("cpu_s"),
             "ns_moving": [1e9 * w / bead_steps for w in report["loop_s"][q]],
             "ns_active": [1e9 * w / bead_steps for w in report["loop_s"][a]],
-            "active_events_per_block": report["active_events"] / repeats,
+            "active_events_per_block": report["events"][a] / repeats,
             "threads": report["threads"], "loadavg_before": before,
             "loadavg_after": os.getloadavg()}
 
 
 def spread(values) -> dict:
-    """Median, min, quartiles and max of ``values``."""
+    """Median (with its 95 % interval, :func:`active_chains.median_ci95`), min, quartiles and
+    max of ``values``."""
     v = np.asarray(values, dtype=float)
     q1, med, q3 = np.percentile(v, [25, 50, 75])
-    return {"median": float(med), "min": float(v.min()), "q1": float(q1), "q3": float(q3),
-            "max": float(v.max()), "count": int(v.size)}
+    return {"median": float(med), "ci95": median_ci95(v)[1], "min": float(v.min()),
+            "q1": float(q1), "q3": float(q3), "max": float(v.max()), "count": int(v.size)}
 
 
 def pooled(n: int, threads: int, rounds: list) -> dict:
@@ -136,31 +110,37 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1e5,1e6")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--repeats", type=int, default=3, help="pairs of blocks per round")
+    ap.add_argument("--repeats", type=int, default=24, help="pairs of blocks per round")
     ap.add_argument("--rounds", type=int, default=4, help="processes per (N, threads)")
-    ap.add_argument("--block-time", type=float, default=2.0,
-                    help="time units per block (800 steps at dt = 0.0025)")
+    ap.add_argument("--block-time", type=float, default=0.25,
+                    help="time units per block (100 steps at dt = 0.0025)")
+    ap.add_argument("--warm-up-time", type=float, default=2.0,
+                    help="time units stepped before the first timed block")
     ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per round")
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--steps", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--warm-up", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--report", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
-        report = worker(args.worker, args.threads[0], args.steps, args.repeats)
+        report = paired_worker(args.worker, args.threads[0], args.steps, args.repeats,
+                               args.warm_up)
         Path(args.report).write_text(json.dumps(report))
         return
     steps = int(round(args.block_time / DT))
+    warm_up = max(1, int(round(args.warm_up_time / args.block_time)))
     points = [(int(float(s)), th) for s in args.sizes.split(",") for th in args.threads]
     measured = {p: [] for p in points}
     for turn in range(args.rounds):
         for n, th in points if turn % 2 == 0 else points[::-1]:
-            r = measure(n, th, steps, args.repeats, args.timeout)
+            r = measure(n, th, steps, args.repeats, warm_up, args.timeout)
             measured[n, th].append(r)
             print(json.dumps({"n": n, "threads": th, **{k: v for k, v in r.items()
                                                         if not k.startswith("loadavg")}}),
                   flush=True)
     result = {"benchmark": __doc__.splitlines()[0], "dt": DT, "steps_per_block": steps,
+              "warm_up_blocks": warm_up,
               "temperatures": {"moving": QUIET, "active": ACTIVE}, "cores": os.cpu_count(),
               "rows": [pooled(n, th, measured[n, th]) for n, th in points]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

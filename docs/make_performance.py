@@ -110,12 +110,24 @@ def active_chains(data: dict, name: str) -> str:
         "random initial velocity and so contact events everywhere. Backend `fast-K` is the "
         "fast backend on K threads, `native-K` LAMMPS's native contact on K MPI ranks.",
         table(["backend", "temperature"] + [f"N = {fmt(n)}" for n in ns], rows),
-        source_line(name, "rows[].ns_per_bead_step_median")])
+        source_line(name, "rows[].ns_per_bead_step_median"),
+        "The active chain (temperature 2) over the chain whose every bead moves (1e-06), "
+        "target 1.3 at every N: for `fast-K` the median ratio of blocks timed in pairs "
+        "(both chains in one process) with its 95 % interval, for `native-K` the median of "
+        "the rounds' ratios; each round's beside it.",
+        table(["backend", "N", "active / moving", "95 % interval", "rounds"],
+              [[r["backend"], fmt(r["n"]), fmt(r["active_over_quiet"]),
+                "-" if "ci95" not in r else f"{fmt(r['ci95'][0])}-{fmt(r['ci95'][1])}",
+                ", ".join(fmt(x) for x in r["rounds"])]
+               for r in data.get("ratios", []) if "active_over_quiet" in r]),
+        source_line(name, "ratios[].active_over_quiet")])
 
 
 def spread_cell(s: dict) -> str:
-    """A ratio's median with its quartiles and range: ``median (q1-q3; min-max)``."""
-    return (f"{fmt(s['median'])} ({fmt(s['q1'])}-{fmt(s['q3'])}; "
+    """A ratio's median with its 95 % interval (where stored), quartiles and range:
+    ``median [ci] (q1-q3; min-max)``."""
+    ci = f" [{fmt(s['ci95'][0])}-{fmt(s['ci95'][1])}]" if "ci95" in s else ""
+    return (f"{fmt(s['median'])}{ci} ({fmt(s['q1'])}-{fmt(s['q3'])}; "
             f"{fmt(s['min'])}-{fmt(s['max'])})")
 
 
@@ -138,8 +150,8 @@ def active_paired(data: dict, name: str) -> str:
         f"{fmt(temps.get('active'))}) over the same chain with every bead moving "
         f"({fmt(temps.get('moving'))}), both in one process, their blocks of "
         f"{fmt(data.get('steps_per_block'))} steps timed in pairs (a slow spell of the "
-        "machine falls on both blocks of a pair): the median ratio of the pairs with their "
-        "quartiles and range, for the compiled loop and for the CPU time of the whole block "
+        "machine falls on both blocks of a pair): the median ratio of the pairs with its 95 % "
+        "interval [in brackets], their quartiles and range, for the compiled loop and for the CPU time of the whole block "
         "(Python's handling of its events included; both threads on two).",
         table(["beads", "threads", "pairs", "loop ratio", "CPU ratio",
                "ns moving", "ns active"], rows),

@@ -50,7 +50,8 @@ def test_work_precision_table_holds_the_files_numbers(tmp_path):
 
 def test_active_paired_table_holds_the_files_numbers(tmp_path):
     mp = load_script()
-    spread = {"median": 1.2345, "q1": 1.2, "q3": 1.3, "min": 1.1, "max": 1.4, "count": 12}
+    spread = {"median": 1.2345, "ci95": [1.18, 1.29], "q1": 1.2, "q3": 1.3, "min": 1.1,
+              "max": 1.4, "count": 12}
     data = {"steps_per_block": 800, "temperatures": {"moving": 1e-6, "active": 2.0},
             "rows": [{"n": 1000000, "threads": 1, "pairs": 12,
                       "active_over_moving_loop": spread,
@@ -60,7 +61,28 @@ def test_active_paired_table_holds_the_files_numbers(tmp_path):
                      {"n": 100000, "threads": 2, "error": "not finished in 1200 s"}]}
     (tmp_path / "active_paired.json").write_text(json.dumps(data))
     page = mp.page(tmp_path)
-    assert ("| 1 000 000 | 1 | 12 | 1.23 (1.20-1.30; 1.10-1.40) | 1.25 (1.20-1.30; 1.10-1.40) "
-            "| 8.50 | 10.5 |") in page
+    assert ("| 1 000 000 | 1 | 12 | 1.23 [1.18-1.29] (1.20-1.30; 1.10-1.40) | "
+            "1.25 [1.18-1.29] (1.20-1.30; 1.10-1.40) | 8.50 | 10.5 |") in page
     assert "| 100 000 | 2 | failed |" in page
     assert "*Source: `benchmarks/results/active_paired.json`, key `rows[]`.*" in page
+
+
+def test_active_chains_ratio_table_holds_the_files_ratios(tmp_path):
+    mp = load_script()
+    rows = [{"n": 1000000, "backend": b, "temperature": t, "ns_per_bead_step_median": ns}
+            for b, t, ns in (("fast-1", 1e-6, 8.5), ("fast-1", 2.0, 10.5),
+                             ("native-2", 1e-6, 11.2), ("native-2", 2.0, 13.5))]
+    ratios = [{"backend": "fast-1", "n": 1000000, "active_over_quiet": 1.2345,
+               "ci95": [1.19, 1.281], "rounds": [1.2, 1.25]},
+              {"backend": "native-2", "n": 1000000, "active_over_quiet": 1.175,
+               "rounds": [1.16, 1.18]},
+              {"backend": "fast", "n": 1000000, "temperature": 2.0,
+               "two_over_one_speed": 1.8, "rounds": [1.8]}]
+    (tmp_path / "active_chains.json").write_text(json.dumps(
+        {"dt": 0.0025, "cores": 2, "rows": rows, "ratios": ratios}))
+    page = mp.page(tmp_path)
+    assert "| fast-1 | 1 000 000 | 1.23 | 1.19-1.28 | 1.20, 1.25 |" in page
+    assert "| native-2 | 1 000 000 | 1.18 | - | 1.16, 1.18 |" in page
+    assert "| fast | 1 000 000 |" not in page  # speed-ups are not active/moving ratios
+    assert ("*Source: `benchmarks/results/active_chains.json`, "
+            "key `ratios[].active_over_quiet`.*") in page
