@@ -219,17 +219,23 @@ def measure(n, temperature, backend, repeats, block_time, timeout):
     return row
 
 
-def measure_pair(n, backend, pairs, pair_time, warm_up_time, timeout):
-    """The moving and the active chain of a fast backend in one process, their blocks of
-    ``pair_time`` alternating (:func:`paired_worker`): a row of each, the active one with the
-    ratio of each pair's blocks (``pair_ratios``).  A block is at least the backend's
-    ``BLOCK_BEAD_STEPS`` (it hands over no less; 1000 steps at N = 1e3), ``pairs`` blocks of
-    ``pair_time`` at most (the same stretch of history)."""
+def pair_blocks(n, pairs, pair_time, warm_up_time):
+    """(steps per block, pairs, warm-up blocks) of a pair at N beads: blocks of ``pair_time``,
+    but at least the fast backend's ``BLOCK_BEAD_STEPS`` (it hands over no less; 1000 steps at
+    N = 1e3), over the stretch of history of ``pairs`` blocks of ``pair_time`` (at least 2)
+    after ``warm_up_time``."""
     from mdgran.backends.fast import BLOCK_BEAD_STEPS
 
     steps = max(int(round(pair_time / DT)), -(-BLOCK_BEAD_STEPS // n))
-    pairs = max(2, int(round(pairs * pair_time / (steps * DT))))
-    warm_up = max(1, int(round(warm_up_time / (steps * DT))))
+    return (steps, max(2, int(round(pairs * pair_time / (steps * DT)))),
+            max(1, int(round(warm_up_time / (steps * DT)))))
+
+
+def measure_pair(n, backend, pairs, pair_time, warm_up_time, timeout):
+    """The moving and the active chain of a fast backend in one process, their blocks
+    alternating (:func:`paired_worker`, :func:`pair_blocks`): a row of each, the active one
+    with the ratio of each pair's blocks (``pair_ratios``)."""
+    steps, pairs, warm_up = pair_blocks(n, pairs, pair_time, warm_up_time)
     base = {"n": n, "backend": backend, "steps_per_block": steps, "repeats": pairs,
             "paired": True, "loadavg_before": os.getloadavg()}
     reports = run_worker(n, backend, ["--pair", "--steps", str(steps), "--repeats", str(pairs),

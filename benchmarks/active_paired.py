@@ -34,21 +34,22 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from active_chains import ACTIVE, DT, QUIET, median_ci95, paired_worker  # noqa: E402
+from active_chains import ACTIVE, DT, QUIET, median_ci95, pair_blocks, paired_worker  # noqa: E402
 
 OUT = HERE / "results" / "active_paired.json"
 
 
-def measure(n: int, threads: int, steps: int, repeats: int, warm_up: int,
-            timeout: float) -> dict:
-    """One round: a worker process; its pairs' ratios and blocks."""
+def measure(n: int, threads: int, repeats: int, block_time: float, warm_up_time: float,
+             timeout: float) -> dict:
+    """One round: a worker process; its pairs' ratios and blocks (of ``block_time``, at least
+    the backend's block, :func:`active_chains.pair_blocks`)."""
+    steps, repeats, warm_up = pair_blocks(n, repeats, block_time, warm_up_time)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,7 +76,7 @@ def measure(n: int, threads: int, steps: int, repeats: int, warm_up: int,
             "ns_moving": [1e9 * w / bead_steps for w in report["loop_s"][q]],
             "ns_active": [1e9 * w / bead_steps for w in report["loop_s"][a]],
             "active_events_per_block": report["events"][a] / repeats,
-            "threads": report["threads"], "loadavg_before": before,
+            "steps_per_block": steps, "threads": report["threads"], "loadavg_before": before,
             "loadavg_after": os.getloadavg()}
 
 
@@ -103,6 +104,7 @@ def pooled(n: int, threads: int, rounds: list) -> dict:
             "ns_per_bead_step_moving_median": float(np.median(every["ns_moving"])),
             "ns_per_bead_step_active_median": float(np.median(every["ns_active"])),
             "active_events_per_block": rounds[0]["active_events_per_block"],
+            "steps_per_block": rounds[0]["steps_per_block"],
             "loadavg": [[r["loadavg_before"], r["loadavg_after"]] for r in rounds]}
 
 
@@ -128,19 +130,18 @@ def main(argv=None):
                                args.warm_up)
         Path(args.report).write_text(json.dumps(report))
         return
-    steps = int(round(args.block_time / DT))
-    warm_up = max(1, int(round(args.warm_up_time / args.block_time)))
     points = [(int(float(s)), th) for s in args.sizes.split(",") for th in args.threads]
     measured = {p: [] for p in points}
     for turn in range(args.rounds):
         for n, th in points if turn % 2 == 0 else points[::-1]:
-            r = measure(n, th, steps, args.repeats, warm_up, args.timeout)
+            r = measure(n, th, args.repeats, args.block_time, args.warm_up_time, args.timeout)
             measured[n, th].append(r)
             print(json.dumps({"n": n, "threads": th, **{k: v for k, v in r.items()
                                                         if not k.startswith("loadavg")}}),
                   flush=True)
-    result = {"benchmark": __doc__.splitlines()[0], "dt": DT, "steps_per_block": steps,
-              "warm_up_blocks": warm_up,
+    result = {"benchmark": __doc__.splitlines()[0], "dt": DT,
+              "steps_per_block": int(round(args.block_time / DT)),
+              "warm_up_time": args.warm_up_time,
               "temperatures": {"moving": QUIET, "active": ACTIVE}, "cores": os.cpu_count(),
               "rows": [pooled(n, th, measured[n, th]) for n, th in points]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
