@@ -96,13 +96,15 @@ def long_chain(data: dict, name: str) -> str:
 
 
 def active_chains(data: dict, name: str) -> str:
-    """ns per bead-step, by backend and temperature (0: a quiet chain) against chain length."""
+    """ns per bead-step, by backend and temperature (0: a quiet chain) against chain length
+    ("failed" where the point's run failed: it has no ratio either); the active/moving ratios."""
     ns = sorted({r["n"] for r in data["rows"]})
     cells = {}
     for r in data["rows"]:
-        cells[(r["backend"], r["temperature"], r["n"])] = r["ns_per_bead_step_median"]
+        cells[(r["backend"], r["temperature"], r["n"])] = (
+            "failed" if "error" in r else fmt(r["ns_per_bead_step_median"]))
     keys = sorted({(r["backend"], r["temperature"]) for r in data["rows"]})
-    rows = [[backend, fmt(temp)] + [fmt(cells.get((backend, temp, n))) for n in ns]
+    rows = [[backend, fmt(temp)] + [cells.get((backend, temp, n), "-") for n in ns]
             for backend, temp in keys]
     return "\n\n".join([
         f"Median ns per bead-step (dt = {fmt(data.get('dt'))}, {data.get('cores', '?')} "
@@ -151,8 +153,9 @@ def active_paired(data: dict, name: str) -> str:
         f"({fmt(temps.get('moving'))}), both in one process, their blocks of "
         f"{fmt(data.get('steps_per_block'))} steps timed in pairs (a slow spell of the "
         "machine falls on both blocks of a pair): the median ratio of the pairs with its 95 % "
-        "interval [in brackets], their quartiles and range, for the compiled loop and for the CPU time of the whole block "
-        "(Python's handling of its events included; both threads on two).",
+        "interval [in brackets], their quartiles and range, for the compiled loop and for "
+        "the CPU time of the whole block (Python's handling of its events included; both "
+        "threads on two).",
         table(["beads", "threads", "pairs", "loop ratio", "CPU ratio",
                "ns moving", "ns active"], rows),
         source_line(name, "rows[]")])

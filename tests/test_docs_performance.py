@@ -72,6 +72,8 @@ def test_active_chains_ratio_table_holds_the_files_ratios(tmp_path):
     rows = [{"n": 1000000, "backend": b, "temperature": t, "ns_per_bead_step_median": ns}
             for b, t, ns in (("fast-1", 1e-6, 8.5), ("fast-1", 2.0, 10.5),
                              ("native-2", 1e-6, 11.2), ("native-2", 2.0, 13.5))]
+    rows.append({"n": 1000, "backend": "fast-1", "temperature": 2.0,
+                 "error": "not finished in 900 s"})
     ratios = [{"backend": "fast-1", "n": 1000000, "active_over_quiet": 1.2345,
                "ci95": [1.19, 1.281], "rounds": [1.2, 1.25]},
               {"backend": "native-2", "n": 1000000, "active_over_quiet": 1.175,
@@ -84,5 +86,6 @@ def test_active_chains_ratio_table_holds_the_files_ratios(tmp_path):
     assert "| fast-1 | 1 000 000 | 1.23 | 1.19-1.28 | 1.20, 1.25 |" in page
     assert "| native-2 | 1 000 000 | 1.18 | - | 1.16, 1.18 |" in page
     assert "| fast | 1 000 000 |" not in page  # speed-ups are not active/moving ratios
+    assert "| fast-1 | 2 | failed | 10.5 |" in page  # a failed point says so
     assert ("*Source: `benchmarks/results/active_chains.json`, "
             "key `ratios[].active_over_quiet`.*") in page
