@@ -31,16 +31,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from active_chains import ACTIVE, DT, QUIET, median_ci95, pair_blocks, paired_worker  # noqa: E402
+from active_chains import ACTIVE, DT, QUIET, median_ci95, pair_blocks, run_worker  # noqa: E402
 
 OUT = HERE / "results" / "active_paired.json"
 
@@ -50,21 +48,13 @@ def measure(n: int, threads: int, repeats: int, block_time: float, warm_up_time:
     """One round: a worker process; its pairs' ratios and blocks (of ``block_time``, at least
     the backend's block, :func:`active_chains.pair_blocks`)."""
     steps, repeats, warm_up = pair_blocks(n, repeats, block_time, warm_up_time)
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     before = os.getloadavg()
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp, "report.json")
-        cmd = [sys.executable, __file__, "--worker", str(n), "--threads", str(threads),
-               "--steps", str(steps), "--repeats", str(repeats), "--warm-up", str(warm_up),
-               "--report", str(out)]
-        try:
-            res = subprocess.run(cmd, capture_output=True, text=True, env=env,
-                                 timeout=timeout, start_new_session=True)
-        except subprocess.TimeoutExpired:
-            return {"error": f"not finished in {timeout} s"}
-        if res.returncode or not out.exists():
-            return {"error": (res.stderr or res.stdout)[-600:]}
-        report = json.loads(out.read_text())
+    reports = run_worker(n, f"fast-{threads}", ["--pair", "--steps", str(steps), "--repeats",
+                                                str(repeats), "--warm-up", str(warm_up)],
+                         timeout)
+    if isinstance(reports, str):
+        return {"error": reports}
+    report = reports[0]
     q, a = str(QUIET), str(ACTIVE)
     bead_steps = n * steps
 
@@ -120,16 +110,7 @@ def main(argv=None):
                     help="time units stepped before the first timed block")
     ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per round")
     ap.add_argument("--out", default=str(OUT))
-    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--steps", type=int, default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--warm-up", type=int, default=1, help=argparse.SUPPRESS)
-    ap.add_argument("--report", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.worker is not None:
-        report = paired_worker(args.worker, args.threads[0], args.steps, args.repeats,
-                               args.warm_up)
-        Path(args.report).write_text(json.dumps(report))
-        return
     points = [(int(float(s)), th) for s in args.sizes.split(",") for th in args.threads]
     measured = {p: [] for p in points}
     for turn in range(args.rounds):
