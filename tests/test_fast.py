@@ -89,6 +89,63 @@ def test_thermal_chain_second_order_and_reference_events():
         assert np.log2(e[0] / e[1]) >= 1.8 and np.log2(e[1] / e[2]) >= 1.8, (errs, ledger)
 
 
+#: scenes whose event windows take each branch of the window's first step: walls, a free end,
+#: unlike beads, substrate damping, a pulsed bead, the JKR band
+WINDOW_SCENES = {
+    "micro-star": [("chain.n", 12)],
+    "mixed/tapered": [],
+    "driven/pulse": [("chain.n", 12), ("substrate.damping", 0.3)],
+    "hard/jkr-displacement": [("chain.n", 12), ("chain.boundary", "free"),
+                              ("substrate.damping", 0.3)],
+}
+
+
+def _window_backend(name, cache={}):
+    from mdgran.backends.fast import FastBackend
+
+    if name not in cache:
+        cache[name] = FastBackend(load_scene(name, WINDOW_SCENES[name]))
+    return cache[name]
+
+
+@settings(max_examples=300, deadline=None)
+@given(name=st.sampled_from(sorted(WINDOW_SCENES)), seed=st.integers(0, 2**32 - 1),
+       where=st.floats(0.0, 1.0), width=st.integers(0, 5), frac=st.floats(0.01, 1.0),
+       t0=st.floats(0.0, 20.0))
+def test_window_start_is_window_pass_without_its_forces(name, seed, where, width, frac, t0):
+    """An event window's first step (the whole step, cut by its event in the usual case) is
+    taken by window_start, which computes no force: its positions, end damping power, edges
+    in the mean-force band and status are window_pass's, bit for bit, for compressions drawn
+    near snap-off, in the bulk and beyond the force table, any contact states and window."""
+    b = _window_backend(name)
+    flags, params, walls = b.flags, b.params, b.flags.walls
+    n, m = b.model.n, b.model.n_contacts
+    lo = int(where * (n - 1))
+    hi = min(lo + width, n - 1)
+    rng = np.random.default_rng(seed)
+    band = params.mean_force_below
+    d = np.where(rng.random(m) < 0.6, rng.uniform(band - 0.15, band + 0.05, m),
+                 rng.uniform(-0.5, 3.0, m))
+    d[rng.random(m) < 0.05] = rng.uniform(90.0, 110.0)  # around the table's end
+    x = np.zeros(n)
+    for j in range(m):  # positions with those compressions
+        left, right = fk.beads_of(walls, j)
+        if 0 <= left and right < n:
+            x[right] = x[left] - params.gap - d[j]
+    cur = fk.Beads(x, rng.normal(0.0, 2.0, n), rng.normal(0.0, 5.0, n))
+    closed = rng.random(m) < 0.7
+    h = frac * b.dt
+    x_start = np.full(n, np.nan)
+    start = fk.window_start(flags, params, cur, x_start, closed, h, t0, lo, hi)
+    nxt = fk.Beads(np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan))
+    memo = np.zeros((m, 2))
+    p1, _, _, band_edges, status, bad = fk.window_pass(flags, params, cur, nxt, closed, h, t0,
+                                                       lo, hi, memo)
+    assert np.float64(start[0]).tobytes() == np.float64(p1).tobytes()
+    assert start[1:] == (band_edges, status, bad)
+    assert x_start.tobytes() == nxt.x.tobytes()
+
+
 @settings(max_examples=12, deadline=None)
 @given(n=st.integers(3, 120), seed=st.integers(0, 10**6), gap=st.sampled_from([0.0, 0.01]),
        segment=st.sampled_from([7, 1 << 30]))

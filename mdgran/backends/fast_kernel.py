@@ -1443,8 +1443,24 @@ def window_contacts(walls, n, m, lo, hi):
     return jl, jr, jl if lo >= 1 else -1, jr if hi <= n - 2 else -1
 
 
+@njit(inline="always")
+def prefetch_window(ks, new, j, left, right):
+    """Ask for the rows an event window of contact j (beads left .. right and their
+    neighbours) will write, long after the pass last touched them in a long chain: the
+    window's two local copies and the end velocities and accelerations (the positions and
+    the start state are read by :func:`first_root` here), and contact j's memo row."""
+    for b in (max(left - 1, 0), min(right + 1, new.x.shape[0] - 1)):
+        for c in range(2):
+            prefetch_row(ks.local.x[c], b)
+            prefetch_row(ks.local.v[c], b)
+            prefetch_row(ks.local.a[c], b)
+        prefetch_row(new.v, b)
+        prefetch_row(new.a, b)
+    prefetch_row(ks.seg.branch, j)
+
+
 @njit(cache=True)
-def find_windows(walls, params, old, x_new, h, ks):
+def find_windows(walls, params, old, new, h, ks):
     """The event windows of a pass from ``old`` (beads of the flagged contacts that have a
     root in the step, :func:`first_root`; windows within two beads of each other joined)
     into ``ks.windows``, in order along the chain; returns their count."""
@@ -1457,10 +1473,11 @@ def find_windows(walls, params, old, x_new, h, ks):
         listed = nf <= seg.flag.shape[1]  # else the segment's every contact
         for k in range(nf if listed else min(j0 + seg.size, closed.shape[0]) - j0):
             j = seg.flag[s, k] if listed else j0 + k
-            if first_root(walls, params, j, old, x_new, closed, h) < 0.0:
+            if first_root(walls, params, j, old, new.x, closed, h) < 0.0:
                 continue
             left, right = beads_of(walls, j)
             left, right = max(left, 0), min(right, n - 1)
+            prefetch_window(ks, new, j, left, right)
             if count > 0 and left <= win[count - 1, W_HI] + 2:
                 win[count - 1, W_HI] = max(win[count - 1, W_HI], right)
             else:
@@ -1501,6 +1518,13 @@ def start_force(flags, params, beads, closed, j):
 
 
 @njit(inline="always")
+def bead_power(flags, params, b, ve, now):
+    """Substrate damping power of bead b at v_est ``ve`` (``now``: :func:`drive_at`)."""
+    g = bead_factors(flags, params, b)[1]
+    return substrate_power(ve - now[1], g, flags, params) if flags[SUB_DAMPED] else 0.0
+
+
+@njit(inline="always")
 def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
     """Bead b of a window sub-step ending at t1: acceleration and end velocity from its net
     contact forces (f, fv), as the pass; ``nxt`` holds its predicted x, v_half and (in
@@ -1512,7 +1536,44 @@ def finish_bead(flags, params, nxt, b, f, fv, h, t1, now):
     nxt.v[b] = vh + 0.5 * h * av
     if flags[PULSE] and b == params.drive.bead:
         push_pulsed_bead(flags, params, nxt, h, t1)
-    return substrate_power(ve - now[1], g, flags, params) if flags[SUB_DAMPED] else 0.0
+    return bead_power(flags, params, b, ve, now)
+
+
+@njit(cache=True)
+def window_start(flags, params, cur, x_new, closed, h, t0, lo, hi):
+    """What the events of a window's first (sub)step of length h from ``cur`` need of
+    :func:`window_pass`, without its forces: the beads' positions (into ``x_new``, from
+    ``lo - 1`` to ``hi + 1``) and, bit for bit as window_pass returns them, the damping
+    power of the window at the end (rates from v_est, summed in the same order), which edge
+    is closed in the mean-force band, and the status and its contact (the force's range
+    test only).  The step is rarely kept whole (an event inside it cuts it); when it is,
+    :func:`resolve_window` steps it again with window_pass."""
+    walls = flags[WALLS]
+    n, m = cur.x.shape[0], closed.shape[0]
+    jl, jr, _, _ = window_contacts(walls, n, m, lo, hi)
+    now = drive_at(flags, params, t0 + h)
+    for b in range(max(lo - 1, 0), min(hi + 1, n - 1) + 1):
+        x_new[b] = predicted(cur, b, h)[0]
+    power, band, status, bad = 0.0, 0, OK, 0
+    for j in range(jl, jr + 1):
+        left, right = beads_of(walls, j)
+        x_l, ve_l = (x_new[left], predicted(cur, left, h)[2]) if left >= 0 else (0.0, 0.0)
+        x_r, ve_r = (x_new[right], predicted(cur, right, h)[2]) if right < n else (0.0, 0.0)
+        d = x_l - x_r - params.gap
+        r = ve_l - ve_r
+        edge = 1 if 0 <= left < lo else (2 if hi < right < n else 0)
+        if closed[j]:
+            if not force_at(flags, params, j, d)[1]:
+                status, bad = OUT_OF_TABLE, j
+            if edge and in_kick_band(flags, params, j, d):
+                band |= edge
+            if flags[DAMPED]:
+                power += params.damping * r * r
+        if lo <= left <= hi:
+            power += bead_power(flags, params, left, ve_l, now)
+    if not walls and hi == n - 1:  # the last bead: no contact right
+        power += bead_power(flags, params, hi, predicted(cur, hi, h)[2], now)
+    return power, band, status, bad
 
 
 @njit(cache=True)
@@ -1635,10 +1696,14 @@ def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
     c, done, h, redo, nsub, viscous, p_pass, first = 0, 0.0, dt, 0, 0, 0.0, 0.0, True
     while True:
         cur, nxt = copies[c], copies[1 - c]
-        p1, f_l, f_r, band, status, bad = window_pass(flags, params, cur, nxt, ks.closed, h,
-                                                      t0 + done, lo, hi, ks.memo)
-        if first:
-            p_pass, first = p1, False  # the window's share of the whole pass's power
+        whole, first = first, False  # the whole step from the start, as the pass took it
+        if whole:
+            p1, band, status, bad = window_start(flags, params, cur, nxt.x, ks.closed, h, t0,
+                                                 lo, hi)
+            p_pass, f_l, f_r = p1, 0.0, 0.0  # the window's share of the whole pass's power
+        else:
+            p1, f_l, f_r, band, status, bad = window_pass(flags, params, cur, nxt, ks.closed,
+                                                          h, t0 + done, lo, hi, ks.memo)
         if status != OK:
             fail(counters, status, bad)
             counters.bad_time = t0 + done + h
@@ -1659,6 +1724,9 @@ def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
         if grow:
             return grow, 0.0, 0.0, 0.0
         if last or redo > 0:  # keep this sub-step
+            if whole:  # no event inside the step: its velocities and edge forces
+                p1, f_l, f_r, _, _, _ = window_pass(flags, params, cur, nxt, ks.closed, h,
+                                                    t0, lo, hi, ks.memo)
             viscous += 0.5 * h * (p_state + p1)
             if driven:
                 e1 = external_power(flags, params, nxt, t0 + done + h, lo, hi)
@@ -1859,7 +1927,7 @@ def local_events(flags, params, old, new, t0, dt, ks, run_lanes):
     (:func:`merge_windows`): the result does not depend on the thread count.  Returns what
     the windows add to the step's trapezoid of the damping power, to its end power and to its
     trapezoid of the excitations' power, and their count."""
-    count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
+    count = find_windows(flags[WALLS], params, old, new, dt, ks)
     for g in range(LANES):
         ks.lanes.counters[g, 0].events = 0
     again = True
