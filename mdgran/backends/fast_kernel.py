@@ -1443,24 +1443,8 @@ def window_contacts(walls, n, m, lo, hi):
     return jl, jr, jl if lo >= 1 else -1, jr if hi <= n - 2 else -1
 
 
-@njit(inline="always")
-def prefetch_window(ks, new, j, left, right):
-    """Ask for the rows an event window of contact j (beads left .. right and their
-    neighbours) will write, long after the pass last touched them in a long chain: the
-    window's two local copies and the end velocities and accelerations (the positions and
-    the start state are read by :func:`first_root` here), and contact j's memo row."""
-    for b in (max(left - 1, 0), min(right + 1, new.x.shape[0] - 1)):
-        for c in range(2):
-            prefetch_row(ks.local.x[c], b)
-            prefetch_row(ks.local.v[c], b)
-            prefetch_row(ks.local.a[c], b)
-        prefetch_row(new.v, b)
-        prefetch_row(new.a, b)
-    prefetch_row(ks.seg.branch, j)
-
-
 @njit(cache=True)
-def find_windows(walls, params, old, new, h, ks):
+def find_windows(walls, params, old, x_new, h, ks):
     """The event windows of a pass from ``old`` (beads of the flagged contacts that have a
     root in the step, :func:`first_root`; windows within two beads of each other joined)
     into ``ks.windows``, in order along the chain; returns their count."""
@@ -1473,11 +1457,10 @@ def find_windows(walls, params, old, new, h, ks):
         listed = nf <= seg.flag.shape[1]  # else the segment's every contact
         for k in range(nf if listed else min(j0 + seg.size, closed.shape[0]) - j0):
             j = seg.flag[s, k] if listed else j0 + k
-            if first_root(walls, params, j, old, new.x, closed, h) < 0.0:
+            if first_root(walls, params, j, old, x_new, closed, h) < 0.0:
                 continue
             left, right = beads_of(walls, j)
             left, right = max(left, 0), min(right, n - 1)
-            prefetch_window(ks, new, j, left, right)
             if count > 0 and left <= win[count - 1, W_HI] + 2:
                 win[count - 1, W_HI] = max(win[count - 1, W_HI], right)
             else:
@@ -1693,11 +1676,10 @@ def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
     f0_r = start_force(flags, params, old, ks.closed, edge_r)
     fs_l, fs_r, j_l, j_r = f0_l, f0_r, 0.0, 0.0  # edge forces at the state, impulses so far
     tol = SIMULTANEOUS * (1.0 + abs(t0))
-    c, done, h, redo, nsub, viscous, p_pass, first = 0, 0.0, dt, 0, 0, 0.0, 0.0, True
+    c, done, h, redo, nsub, viscous, p_pass, light = 0, 0.0, dt, 0, 0, 0.0, 0.0, True
     while True:
         cur, nxt = copies[c], copies[1 - c]
-        whole, first = first, False  # the whole step from the start, as the pass took it
-        if whole:
+        if light:  # the whole step from the start, as the pass took it: no forces
             p1, band, status, bad = window_start(flags, params, cur, nxt.x, ks.closed, h, t0,
                                                  lo, hi)
             p_pass, f_l, f_r = p1, 0.0, 0.0  # the window's share of the whole pass's power
@@ -1723,10 +1705,11 @@ def resolve_window(flags, params, old, new, lane, lo, hi, t0, dt):
                                                                  else 0)
         if grow:
             return grow, 0.0, 0.0, 0.0
+        if light:
+            light = False
+            if last:  # no event inside the step: step it again, with its forces, and keep it
+                continue
         if last or redo > 0:  # keep this sub-step
-            if whole:  # no event inside the step: its velocities and edge forces
-                p1, f_l, f_r, _, _, _ = window_pass(flags, params, cur, nxt, ks.closed, h,
-                                                    t0, lo, hi, ks.memo)
             viscous += 0.5 * h * (p_state + p1)
             if driven:
                 e1 = external_power(flags, params, nxt, t0 + done + h, lo, hi)
@@ -1927,7 +1910,7 @@ def local_events(flags, params, old, new, t0, dt, ks, run_lanes):
     (:func:`merge_windows`): the result does not depend on the thread count.  Returns what
     the windows add to the step's trapezoid of the damping power, to its end power and to its
     trapezoid of the excitations' power, and their count."""
-    count = find_windows(flags[WALLS], params, old, new, dt, ks)
+    count = find_windows(flags[WALLS], params, old, new.x, dt, ks)
     for g in range(LANES):
         ks.lanes.counters[g, 0].events = 0
     again = True
