@@ -146,6 +146,55 @@ def test_window_start_is_window_pass_without_its_forces(name, seed, where, width
     assert x_start.tobytes() == nxt.x.tobytes()
 
 
+def _snap_off_at_step_end(b, eps):
+    """A free chain of 6 beads, contact 2 (beads 2, 3) closed and stretched to delta_off +
+    eps, the others open, its beads moving apart so that it reaches delta_off at the step's
+    end (velocity chosen from its parabola); returns (old state, kernel state)."""
+    params, h = b.params, b.dt
+    ks = fk.new_state(6, 5, 1 << 10)
+    ks.closed[2] = True
+    d0 = params.delta_off + eps
+    x = np.array([-3.0, -2.0, 0.0, -d0, 2.0 - d0, 3.0 - d0])
+    old = fk.Beads(x, np.zeros(6), np.zeros(6))
+    fk.init_acc(fk.Flags(*b.flags), params, old, ks)
+    q = old.a[2] - old.a[3]
+    r = (params.delta_off - d0 - 0.5 * h * h * q) / h
+    old.v[2], old.v[3] = 0.5 * r, -0.5 * r
+    return old, ks
+
+
+@pytest.mark.parametrize("eps", [1e-4, 3e-4, 1e-3, 3e-3, 1e-2])
+def test_window_whose_event_ends_the_step_is_stepped_whole(eps):
+    """An event window whose only event falls at the step's end (a snap-off exactly there,
+    to rounding) keeps its whole first step: it is stepped again with its forces, the
+    contact opens at t0 + dt, and the momentum of the window and its neighbours (a free
+    chain, no substrate, no damping: internal forces only) is what it was, to round-off."""
+    from mdgran.backends.fast import FastBackend
+
+    b = FastBackend(make_scene(
+        chain={"n": 6, "boundary": "free"}, substrate={"k1": 0.0}, contact={"damping": 0.0},
+        impulse={"velocity": 0.0}, run={"duration": 1.0, "output_interval": 0.5,
+                                        "dt": 0.0025}))
+    flags, params, h = fk.Flags(*b.flags), b.params, b.dt
+    old, ks = _snap_off_at_step_end(b, eps)
+    x_new = old.x + h * old.v + 0.5 * h * h * old.a
+    s = fk.first_root(False, params, 2, old, x_new, ks.closed, h)
+    if not s >= h * (1.0 - 1e-9):
+        pytest.skip(f"rounding put the root at {s!r}, not at the step's end")
+    new = fk.Beads(x_new, old.v.copy(), old.a.copy())
+    log = ks.lanes.log
+    lane = fk.Lane(ks.closed, ks.lanes.counters[0],
+                   fk.EventLog(log.time[0], log.contact[0], log.kind[0], log.loss[0]),
+                   ks.lanes.switching[0], ks.lanes.chatter[0], ks.seg.branch, ks.local)
+    grow = fk.resolve_window(flags, params, old, new, lane, 2, 3, 1.0, h)[0]
+    c = lane.counters[0]
+    assert grow == 0 and c["status"] == fk.OK and c["events"] == 1
+    assert lane.log.contact[0] == 2 and lane.log.time[0] == 1.0 + h and not ks.closed[2]
+    p0, p1 = old.v[1:5].sum(), new.v[1:5].sum()
+    assert abs(p1 - p0) <= 1e-13 * np.abs(old.v).sum(), (p0, p1)
+    assert np.abs(new.v[2:4] - old.v[2:4]).max() < 0.5 * np.abs(old.v[2:4]).max()
+
+
 @settings(max_examples=12, deadline=None)
 @given(n=st.integers(3, 120), seed=st.integers(0, 10**6), gap=st.sampled_from([0.0, 0.01]),
        segment=st.sampled_from([7, 1 << 30]))
