@@ -3,15 +3,15 @@ of one step of an active chain, without the rest of the step.
 
 The state is micro-star's physics with ``chain.n = N`` (1e5 by default), ``thermal.temperature
 = 2`` and ``thermal.seed = 1`` at t = 4 (run there by the fast backend, then its accelerations
-computed again by ``init_acc``).  The windows are those the kernel would step from it: the
-beads of the contacts with a root in the step of ``dt`` (beads along their parabolas), joined
-within two beads (as :func:`~mdgran.backends.fast_kernel.find_windows`).  Each timed repeat
-steps every window through its events from the same state (each window's contact states are
-put back after it), in a compiled loop, ``--reps`` times; reported: ns per window of each of
-``--trials`` repeats, their median and min, the windows and the events per window.  A single
+computed again by ``init_acc``). The windows are those the kernel would step from it: the beads
+of the contacts with a root in the step of ``dt`` (beads along their parabolas), joined within
+two beads (the kernel's :func:`~mdgran.backends.fast_kernel.find_windows`). Each timed repeat
+steps every window through its events from the same state (each window's contact states are put
+back after it), in a compiled loop, ``--reps`` times; reported: ns per window of each of
+``--trials`` repeats, their median and min, the windows and the events per window. A single
 thread; the time of one window does not depend on N (its beads and contacts alone), only the
-number of windows does.  On a machine whose speed drifts, compare two trees in alternating
-runs (``PYTHONPATH=<other tree> python benchmarks/event_window.py --out ...``).
+number of windows does. On a machine whose speed drifts, compare two trees in alternating runs
+(``PYTHONPATH=<other tree> python benchmarks/event_window.py --out ...``).
 
 Writes benchmarks/results/event_window.json (``--out``).
 """
@@ -49,27 +49,24 @@ def active_state(n: int):
     return backend, old, flags, ks
 
 
-def compiled():
-    """The two compiled loops: the windows of a state, and the timed one."""
+def windows_of(walls, params, old, x_new, h, ks):
+    """The windows the kernel would step (:func:`~mdgran.backends.fast_kernel.find_windows`,
+    every contact of every segment scanned: each marked as having flagged more contacts than
+    it lists), as (first bead, last bead) rows."""
+    from mdgran.backends import fast_kernel as fk
+
+    seg, counters = ks.seg, ks.counters[0]
+    seg.ints[:, fk.I_FLAGGED] = seg.flag.shape[1] + 1
+    counters["seg_first"], counters["seg_last"] = 0, seg.count - 1
+    count = fk.find_windows(walls, params, old, x_new, h, ks)
+    return ks.windows[:count, [fk.W_LO, fk.W_HI]].copy()
+
+
+def step_windows_loop():
+    """The timed loop: every window stepped through its events from the same state."""
     from numba import njit
 
     from mdgran.backends import fast_kernel as fk
-
-    @njit
-    def windows_of(walls, params, old, x_new, closed, h):
-        out = np.zeros((closed.shape[0], 2), dtype=np.int64)
-        count = 0
-        for j in range(closed.shape[0]):
-            if fk.first_root(walls, params, j, old, x_new, closed, h) < 0.0:
-                continue
-            left, right = fk.beads_of(walls, j)
-            left, right = max(left, 0), min(right, x_new.shape[0] - 1)
-            if count > 0 and left <= out[count - 1, 1] + 2:
-                out[count - 1, 1] = max(out[count - 1, 1], right)
-            else:
-                out[count, 0], out[count, 1] = left, right
-                count += 1
-        return out[:count]
 
     @njit(_nrt=False)
     def step_windows(flags, params, old, new, lane, saved, windows, t0, dt, reps):
@@ -86,7 +83,7 @@ def compiled():
                     lane.closed[j] = saved[j]
         return events
 
-    return windows_of, step_windows
+    return step_windows
 
 
 def measure(n: int, reps: int, trials: int) -> dict:
@@ -95,8 +92,8 @@ def measure(n: int, reps: int, trials: int) -> dict:
     backend, old, flags, ks = active_state(n)
     h, params = backend.dt, backend.params
     new = fk.Beads(old.x + h * old.v + 0.5 * h * h * old.a, old.v.copy(), old.a.copy())
-    windows_of, step_windows = compiled()
-    windows = windows_of(flags.walls, params, old, new.x, ks.closed, h)
+    step_windows = step_windows_loop()
+    windows = windows_of(flags.walls, params, old, new.x, h, ks)
     log = ks.lanes.log
     lane = fk.Lane(ks.closed, ks.lanes.counters[0],
                    fk.EventLog(log.time[0], log.contact[0], log.kind[0], log.loss[0]),
