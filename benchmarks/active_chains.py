@@ -36,8 +36,8 @@ Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``nat
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
 Targets: the active chain (T = 2) within 1.3x the quiet one stepped whole (T = 1e-6) at every
 N; two ranks at least 1.8x one rank at N = 1e6, active. Writes
-benchmarks/results/active_chains.json (``--out``); a run of some backends replaces their rows
-there and keeps the other backends' rows.
+benchmarks/results/active_chains.json (``--out``); a run of some backends, sizes or
+temperatures replaces their points' rows there and keeps the others'.
 """
 from __future__ import annotations
 
@@ -341,12 +341,16 @@ def ratios(rows):
 
 
 def kept_rows(path, new_rows):
-    """The rows of the result file ``path`` whose backend this run did not measure (a run of
-    some backends replaces their rows and keeps the others')."""
+    """The rows of the result file ``path`` of points this run did not measure (a run of some
+    backends, sizes or temperatures replaces their rows and keeps the others')."""
     if not path.exists():
         return []
-    measured = {r["backend"] for r in new_rows}
-    return [r for r in json.loads(path.read_text())["rows"] if r["backend"] not in measured]
+
+    def point(r):
+        return r["backend"], r["n"], r["temperature"]
+
+    measured = {point(r) for r in new_rows}
+    return [r for r in json.loads(path.read_text())["rows"] if point(r) not in measured]
 
 
 def main(argv=None):
