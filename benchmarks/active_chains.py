@@ -175,15 +175,17 @@ def worker(args):
 
 
 # ---- the driver -----------------------------------------------------------------------------
-def run_worker(n, backend, options, timeout):
-    """Run a worker process (``mpiexec -n 2`` for native-2) with the options ``options``;
-    returns its ranks' reports, or an error message (a string)."""
+def run_worker(n, backend, options, timeout, script=__file__, reports=None):
+    """Run ``script``'s worker process (``mpiexec -n 2`` for native-2) with the options
+    ``options``; returns the ``reports`` (default: one a rank) it wrote, or an error message
+    (a string)."""
     ranks = 2 if backend == "native-2" else 1
+    expected = ranks if reports is None else reports
     # one BLAS thread: an idle OpenBLAS thread spinning after numpy's set-up is CPU time
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).with_name("mpiexec"))
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, __file__, "--worker", str(n), "--backend", backend,
+        cmd = [sys.executable, script, "--worker", str(n), "--backend", backend,
                "--report-dir", tmp] + options
         if ranks > 1:
             cmd = [mpiexec, "-n", str(ranks)] + cmd
@@ -192,11 +194,11 @@ def run_worker(n, backend, options, timeout):
                                  start_new_session=True)
         except subprocess.TimeoutExpired:
             return f"not finished in {timeout} s"
-        reports = sorted((json.loads(p.read_text()) for p in Path(tmp).glob("rank-*.json")),
-                         key=lambda r: r["rank"])
-    if res.returncode or len(reports) != ranks:
+        got = sorted((json.loads(p.read_text()) for p in Path(tmp).glob("rank-*.json")),
+                     key=lambda r: r["rank"])
+    if res.returncode or len(got) != expected:
         return (res.stderr or res.stdout)[-600:]
-    return reports
+    return got
 
 
 def measure(n, temperature, backend, repeats, block_time, timeout):

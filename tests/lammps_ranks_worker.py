@@ -32,9 +32,10 @@ def scene():
 def collect(contact: str, balance: bool) -> dict:
     """Frames of one run as arrays, plus the placement of the atoms at every frame; ``balance``
     (several ranks only) moves the slab boundary at the frames of :data:`BALANCE`."""
-    # LAMMPS's default skin (0.3) instead of chain.in's 32 p: atoms then migrate as soon as they
-    # cross the slab boundary (within a frame), the case under test
-    options = {"contact": contact, "extra_commands": ["neighbor 0.3 bin"]}
+    # LAMMPS's default skin (0.3) instead of chain.in's 32 p, tested at every step: atoms then
+    # migrate as soon as they cross the slab boundary (within a frame), the case under test
+    options = {"contact": contact,
+               "extra_commands": ["neighbor 0.3 bin", "neigh_modify every 1 delay 0 check yes"]}
     if contact == "native":
         options["events"] = "quantized"
     b = LammpsBackend(scene(), **options)
