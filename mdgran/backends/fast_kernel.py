@@ -1052,9 +1052,10 @@ def segment_pass(flags, params, old, xn, vn, an, closed, seg, s):
             ev_contact[k], ev_real[k, 0], ev_real[k, 1] = quantized_switch(
                 flags, params, j, d, doff, xo, h, t0, closed)
             nev += 1
-        # closed or open as selects, not branches: in an active chain contacts are closed
-        # and open at random along it, and a branch on it is mispredicted half the time
-        # (the force of an open contact, computed and dropped, is finite: the table's at 0)
+        # closed or open, written as selects (the force of an open contact, computed and
+        # dropped, is finite: the table's at 0); LLVM compiles the force's as a jump around
+        # the table's cubic for an open contact, which measured faster than a forced select
+        # in an active chain, where contacts are closed and open at random (docs/fast.md)
         cl = closed[j]
         f, ok = force_at(flags, params, j, d)
         if cl and not ok:
