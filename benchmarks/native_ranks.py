@@ -41,7 +41,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from active_chains import ACTIVE, DT, QUIET, median_ci95, run_worker, scene_for  # noqa: E402
+from active_chains import ACTIVE, DT, QUIET, run_worker, scene_for  # noqa: E402
+from active_paired import spread  # noqa: E402
 
 OUT = HERE / "results" / "native_ranks.json"
 
@@ -142,15 +143,6 @@ def measure(n, temperature, pairs, block_time, warm_up_time, probe_s, timeout):
             "ns_two": [1e9 * t / bead_steps for t in w["two"]],
             "core_probe_ratio": reports[0]["core_probe_ratio"], "steps_per_block": steps,
             "loadavg_before": before, "loadavg_after": os.getloadavg()}
-
-
-def spread(values) -> dict:
-    """Median with its 95 % interval, min, quartiles, max and count of ``values``."""
-    v = np.asarray(values, dtype=float)
-    q1, q3 = np.percentile(v, [25, 75])
-    median, ci = median_ci95(v)
-    return {"median": median, "ci95": ci, "min": float(v.min()), "q1": float(q1),
-            "q3": float(q3), "max": float(v.max()), "count": int(v.size)}
 
 
 def pooled(n, temperature, rounds) -> dict:
