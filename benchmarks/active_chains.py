@@ -22,15 +22,17 @@ process; rank 0's for ``native``), the events in the timed blocks, and the event
 stepped (``fast``). ``os.getloadavg()`` before and after each point says whether the two cores
 were idle.
 
-A fast backend's moving (T = 1e-6) and active (T = 2) chains run as a pair, in one process,
-their blocks alternating (:func:`paired_worker`): blocks of ``--pair-time`` (100 steps by
-default; at least the backend's 1e6 bead-steps, 1000 steps at N = 1e3) over the same stretch
-of history as the other points (t = 2 to 8 by default), so that a pair's two blocks run within
-seconds of each other and a slow spell of the machine (this one has them, up to 1.5x, lasting
-seconds to minutes) mostly falls on both. Their active-over-moving ratio is the median of all
-pairs' ratios, with a distribution-free 95 % interval, quartiles and each round's median. A
-native backend's ratio, and two threads or ranks over one, is the median of the rounds'
-ratios (within a round the points of one N and backend run one after another).
+A backend's moving (T = 1e-6) and active (T = 2) chains run as a pair, in one process (of
+two ranks for native-2), their blocks alternating (:func:`paired_worker`; for native, two
+LAMMPS instances, :func:`native_paired_worker`): blocks of ``--pair-time`` (100 steps by
+default; at least the fast backend's 1e6 bead-steps, 1000 steps at N = 1e3) over the same
+stretch of history as the other points (t = 2 to 8 by default), so that a pair's two blocks
+run within seconds of each other and a slow spell of the machine (this one has them, up to
+1.5x, lasting seconds to minutes) mostly falls on both. Their active-over-moving ratio is the
+median of all pairs' ratios, with a distribution-free 95 % interval, quartiles and each
+round's median. Two threads or ranks over one is the median of the rounds' ratios (within a
+round the points of one N and backend run one after another; benchmarks/native_ranks.py
+times two ranks over one in pairs).
 
 Backends: ``fast-1`` and ``fast-2`` (the fast backend on 1 and 2 threads), ``native-1`` and
 ``native-2`` (``lammps`` with ``contact=native, events=located`` on 1 and 2 MPI ranks).
@@ -132,6 +134,47 @@ def paired_worker(n, threads, steps, repeats, warm_up):
             "threads": backends[ACTIVE].stats["threads"]}
 
 
+def native_paired_worker(n, steps, repeats, warm_up):
+    """``paired_worker`` for ``fix mdgran/chain`` with located events: the moving and the
+    active chain as two LAMMPS instances of one process (of one rank, or of each of two
+    ranks), their runs of ``steps`` alternating after ``warm_up`` runs of each.  The ranks of
+    LAMMPS's run are in step, so rank 0's wall time of a run is the run's."""
+    from mdgran.backends.lammps import LammpsBackend
+
+    chains = {t: LammpsBackend(scene_for(n, t, steps, repeats + warm_up + 1),
+                               contact="native", events="located") for t in (QUIET, ACTIVE)}
+    for b in chains.values():
+        b._start()
+        b.lmp.command("run 0 post no")
+        for _ in range(warm_up):
+            b.lmp.command(f"run {steps} pre no post no")
+
+    def events(b):
+        return int(b.lmp.extract_fix("contact", 0, 1, 2))
+
+    wall, cpu = {QUIET: [], ACTIVE: []}, {QUIET: [], ACTIVE: []}
+    start = {t: events(b) for t, b in chains.items()}
+    try:
+        for k in range(repeats):
+            for t in ((QUIET, ACTIVE) if k % 2 == 0 else (ACTIVE, QUIET)):
+                t0, c0 = time.perf_counter(), time.process_time()
+                chains[t].lmp.command(f"run {steps} pre no post no")
+                wall[t].append(time.perf_counter() - t0)
+                cpu[t].append(time.process_time() - c0)
+        for b in chains.values():
+            if getattr(b, "_error", None) is not None:
+                raise b._error
+        return {"loop_s": {str(t): v for t, v in wall.items()},
+                "wall_s": {str(t): v for t, v in wall.items()},
+                "cpu_s": {str(t): v for t, v in cpu.items()},
+                "events": {str(t): events(b) - start[t] for t, b in chains.items()},
+                "event_windows": {str(t): None for t in chains},
+                "threads": None, "rank": chains[ACTIVE].lmp.extract_setting("world_rank")}
+    finally:
+        for b in chains.values():
+            b.lmp.close()
+
+
 def native_worker(n, temperature, steps, repeats):
     """``fix mdgran/chain`` with located events: LAMMPS's ``run`` of ``steps`` steps."""
     from mdgran.backends.lammps import LammpsBackend
@@ -163,7 +206,10 @@ def _rss():
 
 def worker(args):
     n, temperature, steps = args.worker, args.temperature, args.steps
-    if args.pair:
+    if args.pair and args.backend.startswith("native"):
+        report = native_paired_worker(n, steps, args.repeats, args.warm_up)
+        report["rss_MB"] = _rss()
+    elif args.pair:
         report = paired_worker(n, int(args.backend[-1]), steps, args.repeats, args.warm_up)
         report["rank"], report["rss_MB"] = 0, _rss()
     elif args.backend.startswith("fast"):
@@ -234,9 +280,9 @@ def pair_blocks(n, pairs, pair_time, warm_up_time):
 
 
 def measure_pair(n, backend, pairs, pair_time, warm_up_time, timeout):
-    """The moving and the active chain of a fast backend in one process, their blocks
-    alternating (:func:`paired_worker`, :func:`pair_blocks`): a row of each, the active one
-    with the ratio of each pair's blocks (``pair_ratios``)."""
+    """The moving and the active chain of a backend in one process, their blocks
+    alternating (:func:`paired_worker`, :func:`native_paired_worker`, :func:`pair_blocks`):
+    a row of each, the active one with the ratio of each pair's blocks (``pair_ratios``)."""
     steps, pairs, warm_up = pair_blocks(n, pairs, pair_time, warm_up_time)
     base = {"n": n, "backend": backend, "steps_per_block": steps, "repeats": pairs,
             "paired": True, "loadavg_before": os.getloadavg()}
@@ -320,7 +366,7 @@ def round_ratio(num, den):
 
 def ratios(rows):
     """Active (T = 2) / quiet stepped whole (T = 1e-6) per (backend, N): of the pairs
-    (:func:`pair_ratio`) for a fast backend, else the median of the rounds' ratios
+    (:func:`pair_ratio`) for a row timed in pairs, else the median of the rounds' ratios
     (:func:`round_ratio`); and 2 / 1 (threads or ranks) per (N, T), the median of the rounds'
     ratios."""
     done = {(r["backend"], r["n"], r["temperature"]): r for r in rows if "error" not in r}
@@ -383,9 +429,9 @@ def main(argv=None):
               for backend in args.backends for t in args.temperatures]
     measured = {p: [] for p in points}
     paired = {QUIET, ACTIVE} <= set(args.temperatures)
-    # a fast backend's moving and active chains: one point, their blocks in pairs
-    runs = [(n, b, "pair" if paired and b.startswith("fast") and t == QUIET else t)
-            for n, b, t in points if not (paired and b.startswith("fast") and t == ACTIVE)]
+    # a backend's moving and active chains: one point, their blocks in pairs
+    runs = [(n, b, "pair" if paired and t == QUIET else t)
+            for n, b, t in points if not (paired and t == ACTIVE)]
     pairs = int(round(args.repeats * args.block_time / args.pair_time))
     for turn in range(args.rounds):
         for n, backend, t in runs if turn % 2 == 0 else runs[::-1]:

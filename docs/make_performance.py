@@ -114,9 +114,9 @@ def active_chains(data: dict, name: str) -> str:
         table(["backend", "temperature"] + [f"N = {fmt(n)}" for n in ns], rows),
         source_line(name, "rows[].ns_per_bead_step_median"),
         "The active chain (temperature 2) over the chain whose every bead moves (1e-06), "
-        "target 1.3 at every N: for `fast-K` the median ratio of blocks timed in pairs "
-        "(both chains in one process) with its 95 % interval, for `native-K` the median of "
-        "the rounds' ratios; each round's beside it.",
+        "target 1.3 at every N: the median ratio of blocks timed in pairs (both chains in "
+        "one process) with its 95 % interval (a row without one: the median of the rounds' "
+        "ratios); each round's median beside it.",
         table(["backend", "N", "active / moving", "95 % interval", "rounds"],
               [[r["backend"], fmt(r["n"]), fmt(r["active_over_quiet"]),
                 "-" if "ci95" not in r else f"{fmt(r['ci95'][0])}-{fmt(r['ci95'][1])}",
