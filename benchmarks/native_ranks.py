@@ -17,9 +17,11 @@ spell of the machine (this one has them: a CPU loop on its own reads up to 1.5x 
 seconds to minutes) mostly falls on both, where two points measured minutes apart, as in
 active_chains.py, take whatever state each found.
 
-Before each pair both ranks time the same CPU loop at once (``--probe`` seconds, a few ms):
-the ratio of rank 1's time to rank 0's says whether one core was slower than the other in
-that pair (a two-rank block waits for the slower).
+Before each pair both ranks time the same CPU loop at once (``--probe``: about 2 ms of
+Python): the ratio of rank 1's time to rank 0's, a rough reading of whether one core was
+slower than the other then (a two-rank block waits for the slower).  Measured: medians near
+1.0, single pairs up to 1.8, not following the pairs' speed-ups (too short a loop to say
+more; reported, not used).
 
 Reported per (N, T): the median of the pairs' ratios (one-rank wall time of LAMMPS's ``run``
 over two-rank), with its distribution-free 95 % interval, quartiles, min and max and each
