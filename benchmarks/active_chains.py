@@ -134,20 +134,34 @@ def paired_worker(n, threads, steps, repeats, warm_up):
             "threads": backends[ACTIVE].stats["threads"]}
 
 
+def native_chain(n, temperature, steps, blocks, comm=None):
+    """``fix mdgran/chain`` with located events on the chain of :func:`scene_for`, on the MPI
+    communicator ``comm`` (default: every rank), set up by a ``run 0``."""
+    from mdgran.backends.lammps import LammpsBackend
+
+    b = LammpsBackend(scene_for(n, temperature, steps, blocks), comm=comm, contact="native",
+                      events="located")
+    b._start()
+    b.lmp.command("run 0 post no")
+    return b
+
+
+def timed_run(b, steps):
+    """Wall and CPU seconds of LAMMPS's ``run`` of ``steps`` steps (no set-up, no summary)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    b.lmp.command(f"run {steps} pre no post no")
+    return time.perf_counter() - t0, time.process_time() - c0
+
+
 def native_paired_worker(n, steps, repeats, warm_up):
     """``paired_worker`` for ``fix mdgran/chain`` with located events: the moving and the
     active chain as two LAMMPS instances of one process (of one rank, or of each of two
     ranks), their runs of ``steps`` alternating after ``warm_up`` runs of each.  The ranks of
     LAMMPS's run are in step, so rank 0's wall time of a run is the run's."""
-    from mdgran.backends.lammps import LammpsBackend
-
-    chains = {t: LammpsBackend(scene_for(n, t, steps, repeats + warm_up + 1),
-                               contact="native", events="located") for t in (QUIET, ACTIVE)}
+    chains = {t: native_chain(n, t, steps, repeats + warm_up + 1) for t in (QUIET, ACTIVE)}
     for b in chains.values():
-        b._start()
-        b.lmp.command("run 0 post no")
         for _ in range(warm_up):
-            b.lmp.command(f"run {steps} pre no post no")
+            timed_run(b, steps)
 
     def events(b):
         return int(b.lmp.extract_fix("contact", 0, 1, 2))
@@ -157,15 +171,13 @@ def native_paired_worker(n, steps, repeats, warm_up):
     try:
         for k in range(repeats):
             for t in ((QUIET, ACTIVE) if k % 2 == 0 else (ACTIVE, QUIET)):
-                t0, c0 = time.perf_counter(), time.process_time()
-                chains[t].lmp.command(f"run {steps} pre no post no")
-                wall[t].append(time.perf_counter() - t0)
-                cpu[t].append(time.process_time() - c0)
+                w, c = timed_run(chains[t], steps)
+                wall[t].append(w)
+                cpu[t].append(c)
         for b in chains.values():
             if getattr(b, "_error", None) is not None:
                 raise b._error
         return {"loop_s": {str(t): v for t, v in wall.items()},
-                "wall_s": {str(t): v for t, v in wall.items()},
                 "cpu_s": {str(t): v for t, v in cpu.items()},
                 "events": {str(t): events(b) - start[t] for t, b in chains.items()},
                 "event_windows": {str(t): None for t in chains},
@@ -177,21 +189,15 @@ def native_paired_worker(n, steps, repeats, warm_up):
 
 def native_worker(n, temperature, steps, repeats):
     """``fix mdgran/chain`` with located events: LAMMPS's ``run`` of ``steps`` steps."""
-    from mdgran.backends.lammps import LammpsBackend
-
-    b = LammpsBackend(scene_for(n, temperature, steps, repeats + 1), contact="native",
-                      events="located")
-    b._start()
+    b = native_chain(n, temperature, steps, repeats + 1)
     lmp = b.lmp
     try:
-        lmp.command("run 0 post no")
-        lmp.command(f"run {steps} pre no post no")  # warm-up
+        timed_run(b, steps)  # warm-up
         walls, cpus = [], []
         for _ in range(repeats):
-            t0, c0 = time.perf_counter(), time.process_time()
-            lmp.command(f"run {steps} pre no post no")
-            walls.append(time.perf_counter() - t0)
-            cpus.append(time.process_time() - c0)
+            w, c = timed_run(b, steps)
+            walls.append(w)
+            cpus.append(c)
         if getattr(b, "_error", None) is not None:
             raise b._error
         return {"wall_s": walls, "cpu_s": cpus, "rank": lmp.extract_setting("world_rank"),

@@ -43,7 +43,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from active_chains import ACTIVE, DT, QUIET, run_worker, scene_for  # noqa: E402
+from active_chains import ACTIVE, DT, QUIET, native_chain, run_worker  # noqa: E402
+from active_chains import timed_run as timed  # noqa: E402
 from active_paired import spread  # noqa: E402
 
 OUT = HERE / "results" / "native_ranks.json"
@@ -67,20 +68,9 @@ def probe(seconds_hint):
     return time.perf_counter() - t0
 
 
-def native_chain(n, temperature, steps, blocks, comm):
-    from mdgran.backends.lammps import LammpsBackend
-
-    b = LammpsBackend(scene_for(n, temperature, steps, blocks), comm=comm, contact="native",
-                      events="located")
-    b._start()
-    b.lmp.command("run 0 post no")
-    return b
-
-
 def timed_run(b, steps):
-    t0 = time.perf_counter()
-    b.lmp.command(f"run {steps} pre no post no")
-    return time.perf_counter() - t0
+    """Wall seconds of LAMMPS's run of ``steps`` steps (:func:`active_chains.timed_run`)."""
+    return timed(b, steps)[0]
 
 
 def paired_worker(n, temperature, steps, pairs, warm_up, probe_s):
