@@ -7,6 +7,7 @@ tolerance 1e-12): the error shrinks ~4x when dt halves, the events are the refer
 ledger closes to the fast backend's level; 1 and 2 MPI ranks agree bit for bit, windows across
 the slab boundary included, and a window beyond the ghosts stops the run.  (The quantized mode against the hook, bitwise: tests/test_lammps_plugin.py.)
 """
+import ctypes
 import shutil
 import subprocess
 import sys
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import run_on_one_and_two_ranks, spread_chain_input
+from mdgran.backends.lammps import plugin as native_plugin
 from mdgran.model.scene import SceneError, load_scene
 from mdgran.simulation import make_backend, run
 
@@ -295,6 +297,31 @@ def test_active_chain_is_the_fast_backends(plugin):
     assert np.abs(a.x - b.x).max() < 1e-9 and np.abs(a.v - b.v).max() < 1e-9
 
 
+
+
+def test_event_table_in_one_call_is_the_global_array(plugin):
+    """The plugin's ``mdgran_chain_events`` (the backend reads the fix's events so, one call a
+    frame) copies the event table as LAMMPS's library interface gives it one value at a time
+    (time, contact, kind, step), stops at its end, and gives -1 for an ID that is not a fix
+    mdgran/chain."""
+    sc = load_scene("micro-star", [("chain.n", 200), ("thermal.temperature", 2.0),
+                                   ("thermal.seed", 1)])
+    b = make_backend(sc, "lammps", contact="native", events="located")
+    b._start()
+    lmp = b.lmp
+    try:
+        lmp.command("run 400")
+        n = int(lmp.extract_fix("contact", 0, 1, 2))
+        table = [[lmp.extract_fix("contact", 0, 2, r, c) for c in range(4)] for r in range(n)]
+        read = native_plugin.event_reader(b.plugin)
+        rows = np.full((n + 1, 4), np.nan)
+        out = rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        assert n >= 10 and read(lmp.lmp, b"contact", 0, n + 1, out) == n
+        assert rows[:n].tolist() == table and np.isnan(rows[n]).all()
+        assert read(lmp.lmp, b"contact", n - 3, 3, out) == 3 and rows[:3].tolist() == table[-3:]
+        assert read(lmp.lmp, b"no-such-fix", 0, 1, out) == -1
+    finally:
+        lmp.close()
 
 
 def front_input(plugin, n):

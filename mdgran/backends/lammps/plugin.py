@@ -18,6 +18,7 @@ This module uses the standard library only (``setup.py`` runs it before any depe
 """
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import importlib.metadata as metadata
 import importlib.util
@@ -152,6 +153,19 @@ def plugin_path(build_if_needed: bool = True) -> Path:
 def load_commands(path=None) -> list[str]:
     """LAMMPS commands that load the plugin (``fix mdgran/chain`` is defined afterwards)."""
     return [f"plugin load {path or plugin_path()}"]
+
+
+def event_reader(path):
+    """The plugin's ``mdgran_chain_events`` (``fix/mdgranplugin.cpp``) through ctypes:
+    ``read(handle, fix_id, first, count, out) -> rows copied`` copies rows ``first ..
+    first + count - 1`` of a ``fix mdgran/chain``'s event table (time, contact, kind, step)
+    into ``out`` (``4 * count`` doubles) in one call; ``handle``: the LAMMPS instance's
+    ``lammps.lmp``.  ``path``: the plugin LAMMPS loaded (the same file is the same library)."""
+    read = ctypes.CDLL(str(path)).mdgran_chain_events
+    read.argtypes = (ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int,
+                     ctypes.POINTER(ctypes.c_double))
+    read.restype = ctypes.c_int
+    return read
 
 
 def write_spline(table, path):

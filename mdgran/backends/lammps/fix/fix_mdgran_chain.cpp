@@ -2519,6 +2519,20 @@ double FixMdgranChain::compute_array(int row, int col)
   return (double) e.step;
 }
 
+// Rows first .. first + count - 1 of the global array (time, contact, kind, step) into out,
+// 4 doubles a row, the values compute_array gives one at a time (read that way through
+// LAMMPS's library interface, an event cost ~10 us in Python: an active chain of 1e5 beads
+// has ~1e4 a time unit).  Collective on several ranks, as compute_array.  Returns the rows
+// copied (fewer than count past the last).
+int FixMdgranChain::copy_events(int first, int count, double *out)
+{
+  if (comm->nprocs > 1 && synced_step != update->ntimestep) sync();
+  const int n = std::max(0, std::min(count, (int) ev_all.size() - first));
+  for (int k = 0; k < n; k++)
+    for (int col = 0; col < 4; col++) out[4 * k + col] = compute_array(first + k, col);
+  return n;
+}
+
 // ---- per-atom state: growth, migration, restart, ghosts ---------------------------------
 
 void FixMdgranChain::grow_arrays(int nmax)

@@ -72,6 +72,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double compute_scalar() override;
   double compute_vector(int) override;
   double compute_array(int, int) override;
+  int copy_events(int first, int count, double *out);
 
   void grow_arrays(int) override;
   void copy_arrays(int, int, int) override;

@@ -4,6 +4,8 @@
 #include "lammpsplugin.h"
 
 #include "fix_mdgran_chain.h"
+#include "lammps.h"
+#include "modify.h"
 
 using namespace LAMMPS_NS;
 
@@ -29,3 +31,15 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
 // Version the plugin was compiled for: mdgran/backends/lammps/plugin.py compares it with the LAMMPS that
 // loads it (LAMMPS itself only prints a note on a mismatch, and the class layouts may differ).
 extern "C" const char *mdgran_plugin_lammps_version() { return MDGRAN_LAMMPS_VERSION; }
+
+// Rows first .. first + count - 1 of the event table of the fix mdgran/chain with ID fix_id of
+// the LAMMPS instance lmp (the library interface's handle) into out, 4 doubles a row (time,
+// contact, kind, step), in one call (FixMdgranChain::copy_events; collective on several
+// ranks).  Returns the rows copied, or -1 if fix_id is not a fix mdgran/chain.
+extern "C" int mdgran_chain_events(void *lmp, const char *fix_id, int first, int count,
+                                   double *out)
+{
+  Fix *fix = static_cast<LAMMPS *>(lmp)->modify->get_fix_by_id(fix_id);
+  auto *chain = dynamic_cast<FixMdgranChain *>(fix);
+  return chain ? chain->copy_events(first, count, out) : -1;
+}
