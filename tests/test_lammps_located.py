@@ -303,7 +303,8 @@ def test_event_table_in_one_call_is_the_global_array(plugin):
     """The plugin's ``mdgran_chain_events`` (the backend reads the fix's events so, one call a
     frame) copies the event table as LAMMPS's library interface gives it one value at a time
     (time, contact, kind, step), stops at its end, and gives -1 for an ID that is not a fix
-    mdgran/chain."""
+    mdgran/chain; rows it released read 0 (and -1 from it), the count and the later rows
+    stay."""
     sc = load_scene("micro-star", [("chain.n", 200), ("thermal.temperature", 2.0),
                                    ("thermal.seed", 1)])
     b = make_backend(sc, "lammps", contact="native", events="located")
@@ -316,10 +317,15 @@ def test_event_table_in_one_call_is_the_global_array(plugin):
         read = native_plugin.event_reader(b.plugin)
         rows = np.full((n + 1, 4), np.nan)
         out = rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        assert n >= 10 and read(lmp.lmp, b"contact", 0, n + 1, out) == n
+        assert n >= 10 and read(lmp.lmp, b"contact", 0, n + 1, out, 0) == n
         assert rows[:n].tolist() == table and np.isnan(rows[n]).all()
-        assert read(lmp.lmp, b"contact", n - 3, 3, out) == 3 and rows[:3].tolist() == table[-3:]
-        assert read(lmp.lmp, b"no-such-fix", 0, 1, out) == -1
+        assert read(lmp.lmp, b"no-such-fix", 0, 1, out, 0) == -1
+        assert read(lmp.lmp, b"contact", 0, n - 3, out, 1) == n - 3
+        assert read(lmp.lmp, b"contact", n - 3, 3, out, 0) == 3 and rows[:3].tolist() == table[-3:]
+        assert read(lmp.lmp, b"contact", n - 4, 1, out, 0) == -1
+        assert int(lmp.extract_fix("contact", 0, 1, 2)) == n
+        assert [lmp.extract_fix("contact", 0, 2, n - 4, c) for c in range(4)] == [0.0] * 4
+        assert [lmp.extract_fix("contact", 0, 2, n - 1, c) for c in range(4)] == table[-1]
     finally:
         lmp.close()
 

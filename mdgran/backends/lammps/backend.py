@@ -637,12 +637,13 @@ class LammpsBackend(Backend):
     def _native_events(self, first, end):
         """Rows ``first .. end - 1`` of fix mdgran/chain's event table (its global array: time,
         contact, kind, step) as :class:`Events`, copied in one call (read one value at a time
-        through LAMMPS's library interface, an event cost ~10 us)."""
+        through LAMMPS's library interface, an event cost ~10 us), and released: the fix holds
+        a frame's events, not the run's."""
         if self._read_events is None:
             self._read_events = native_plugin.event_reader(self.plugin)
         rows = np.empty((end - first, 4))
         got = self._read_events(self.lmp.lmp, b"contact", first, end - first,
-                                rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+                                rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 1)
         if got != end - first:
             raise RuntimeError(f"fix mdgran/chain gave {got} of its events {first} .. {end - 1}")
         return Events(rows[:, 0], rows[:, 1].astype(np.int64), rows[:, 2].astype(np.int8))

@@ -157,13 +157,15 @@ def load_commands(path=None) -> list[str]:
 
 def event_reader(path):
     """The plugin's ``mdgran_chain_events`` (``fix/mdgranplugin.cpp``) through ctypes:
-    ``read(handle, fix_id, first, count, out) -> rows copied`` copies rows ``first ..
+    ``read(handle, fix_id, first, count, out, release) -> rows copied`` copies rows ``first ..
     first + count - 1`` of a ``fix mdgran/chain``'s event table (time, contact, kind, step)
-    into ``out`` (``4 * count`` doubles) in one call; ``handle``: the LAMMPS instance's
-    ``lammps.lmp``.  ``path``: the plugin LAMMPS loaded (the same file is the same library)."""
+    into ``out`` (``4 * count`` doubles) in one call, and with ``release`` the fix forgets
+    the rows up to them (-1: not that fix, or ``first`` released); ``handle``: the LAMMPS
+    instance's ``lammps.lmp``.  ``path``: the plugin LAMMPS loaded (the same file is the
+    same library)."""
     read = ctypes.CDLL(str(path)).mdgran_chain_events
     read.argtypes = (ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int,
-                     ctypes.POINTER(ctypes.c_double))
+                     ctypes.POINTER(ctypes.c_double), ctypes.c_int)
     read.restype = ctypes.c_int
     return read
 

@@ -245,6 +245,7 @@ FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
   extvector = -1;    // the sums are extensive, the moved hull's tags are not
   array_flag = 1;
   size_array_rows = 0;
+  ev_first = 0;
   size_array_cols = 4;
   size_array_rows_variable = 1;
   extarray = 0;
@@ -869,7 +870,7 @@ template <bool MIX> void FixMdgranChain::compute_t(bigint step)
   work_prev = ext_power;
   last_step = step;
   have_last = 1;
-  size_array_rows = (int) ev_all.size();
+  size_array_rows = event_rows();
 }
 
 // sums over ranks and the event list gathered on every rank (collective)
@@ -921,7 +922,7 @@ void FixMdgranChain::sync()
     });
   ev_all.insert(ev_all.end(), got.begin(), got.end());
   ev_local.clear();
-  size_array_rows = (int) ev_all.size();
+  size_array_rows = event_rows();
 }
 
 void FixMdgranChain::post_run()
@@ -1450,7 +1451,7 @@ void FixMdgranChain::add_event(tagint left, int kind, double time, double lost)
     d_hyst += lost;
     ev_local.push_back(e);
   }
-  size_array_rows = (int) ev_all.size();
+  size_array_rows = event_rows();
 }
 
 // Switch contact c at the current positions (the set-up's settle): opening loses V(delta)
@@ -2499,7 +2500,7 @@ double FixMdgranChain::compute_vector(int n)
   if (comm->nprocs > 1 && synced_step != update->ntimestep) sync();
   if (n == 0) return d_hyst_all;
   if (n == 1) return d_visc_all;
-  if (n == 2) return (double) ev_all.size();
+  if (n == 2) return (double) event_rows();
   if (n == 3) return work_all;
   if (n == 6) return comm->nprocs > 1 ? bead_steps_all : bead_steps;
   if (n == 7) return comm->nprocs > 1 ? joins_all : joins;
@@ -2511,8 +2512,8 @@ double FixMdgranChain::compute_vector(int n)
 double FixMdgranChain::compute_array(int row, int col)
 {
   if (comm->nprocs > 1 && synced_step != update->ntimestep) sync();
-  if (row < 0 || row >= (int) ev_all.size()) return 0.0;
-  const Event &e = ev_all[row];
+  if (row < ev_first || row >= event_rows()) return 0.0;    // released, or beyond the last
+  const Event &e = ev_all[row - ev_first];
   if (col == 0) return e.time;
   if (col == 1) return (double) contact_number(e.left);
   if (col == 2) return (double) e.kind;
@@ -2523,14 +2524,27 @@ double FixMdgranChain::compute_array(int row, int col)
 // 4 doubles a row, the values compute_array gives one at a time (read that way through
 // LAMMPS's library interface, an event cost ~10 us in Python: an active chain of 1e5 beads
 // has ~1e4 a time unit).  Collective on several ranks, as compute_array.  Returns the rows
-// copied (fewer than count past the last).
+// copied (fewer than count past the last), -1 if first is a released row.
 int FixMdgranChain::copy_events(int first, int count, double *out)
 {
   if (comm->nprocs > 1 && synced_step != update->ntimestep) sync();
-  const int n = std::max(0, std::min(count, (int) ev_all.size() - first));
+  if (first < ev_first) return -1;
+  const int n = std::max(0, std::min(count, event_rows() - first));
   for (int k = 0; k < n; k++)
     for (int col = 0; col < 4; col++) out[4 * k + col] = compute_array(first + k, col);
   return n;
+}
+
+// The rows before end released (a reader that has copied them, the backend after each frame):
+// the fix then holds the events since, not every event of the run (an active chain of 1e6
+// beads has ~1e5 a time unit, 24 bytes each on every rank).  Their rows read 0 afterwards;
+// the count (vector element 3) and the later rows' numbers stay.
+void FixMdgranChain::drop_events(int end)
+{
+  const bigint n = std::min<bigint>(end - ev_first, (bigint) ev_all.size());
+  if (n <= 0) return;
+  ev_all.erase(ev_all.begin(), ev_all.begin() + n);
+  ev_first += n;
 }
 
 // ---- per-atom state: growth, migration, restart, ghosts ---------------------------------

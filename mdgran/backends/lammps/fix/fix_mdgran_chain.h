@@ -73,6 +73,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   double compute_vector(int) override;
   double compute_array(int, int) override;
   int copy_events(int first, int count, double *out);
+  void drop_events(int end);
 
   void grow_arrays(int) override;
   void copy_arrays(int, int, int) override;
@@ -162,7 +163,10 @@ class FixMdgranChain : public Fix, public MdgranLaw {
     double time;
   };
   std::vector<Event> ev_local;              // since the last sync, this rank
-  std::vector<Event> ev_all;                // every event so far, all ranks, in order
+  std::vector<Event> ev_all;                // the events since ev_first, all ranks, in order
+  bigint ev_first;                          // events released by drop_events (row numbers
+                                            // of the global array stay those of every event)
+  int event_rows() const { return (int) (ev_first + (bigint) ev_all.size()); }
 
   // ---- located events (events located): the fix integrates the chain itself --------------
   int located;                              // 1: events located inside the step; 0: quantized

@@ -35,11 +35,15 @@ extern "C" const char *mdgran_plugin_lammps_version() { return MDGRAN_LAMMPS_VER
 // Rows first .. first + count - 1 of the event table of the fix mdgran/chain with ID fix_id of
 // the LAMMPS instance lmp (the library interface's handle) into out, 4 doubles a row (time,
 // contact, kind, step), in one call (FixMdgranChain::copy_events; collective on several
-// ranks).  Returns the rows copied, or -1 if fix_id is not a fix mdgran/chain.
+// ranks), and with release != 0 every row before first + count released (drop_events).
+// Returns the rows copied; -1 if fix_id is not a fix mdgran/chain or first was released.
 extern "C" int mdgran_chain_events(void *lmp, const char *fix_id, int first, int count,
-                                   double *out)
+                                   double *out, int release)
 {
   Fix *fix = static_cast<LAMMPS *>(lmp)->modify->get_fix_by_id(fix_id);
   auto *chain = dynamic_cast<FixMdgranChain *>(fix);
-  return chain ? chain->copy_events(first, count, out) : -1;
+  if (!chain) return -1;
+  const int got = chain->copy_events(first, count, out);
+  if (got >= 0 && release) chain->drop_events(first + got);
+  return got;
 }
