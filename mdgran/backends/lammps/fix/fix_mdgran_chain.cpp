@@ -2538,7 +2538,7 @@ int FixMdgranChain::copy_events(int first, int count, double *out)
 // The rows before end released (a reader that has copied them, the backend after each frame):
 // the fix then holds the events since, not every event of the run (an active chain of 1e6
 // beads has ~1e5 a time unit, 24 bytes each on every rank).  Their rows read 0 afterwards;
-// the count (vector element 3) and the later rows' numbers stay.
+// the count (f_ID[3]) and the later rows' numbers stay.
 void FixMdgranChain::drop_events(int end)
 {
   const bigint n = std::min<bigint>(end - ev_first, (bigint) ev_all.size());
