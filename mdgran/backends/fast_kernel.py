@@ -901,11 +901,11 @@ def kick_branches(flags, params, old, h, kicked, kick, row, count, memo):
     operations; the start's from ``memo`` when it holds it (:func:`memo_mean_force`).  With
     one law, the end's inversions eight at a time in vector instructions (:func:`invert_kicks`:
     one inversion is a chain of dependent square roots and divisions), and the memo rows, far
-    apart in a long chain, read
-    one after another before any is used (the kicks of an active chain of 1e5 beads took 1.4
-    ns a bead-step, one contact after another).  The pass asked for each row when it found
-    the contact in the band (``prefetch_row``, :mod:`mdgran.backends.prefetch`): at 1e6 beads
-    this function then took 0.08 ns a bead-step, 0.45 before (a miss per row)."""
+    apart in a long chain, read one after another before any is used (the kicks of an active
+    chain of 1e5 beads took 1.4 ns a bead-step, one contact after another).  The pass asked
+    for each row when it found the contact in the band (``prefetch_row``,
+    :mod:`mdgran.backends.prefetch`): at 1e6 beads this function then took 0.08 ns a
+    bead-step, 0.45 before (a miss per row)."""
     walls = flags[WALLS]
     rshift = 0 if walls else 1
     n = old.x.shape[0]
