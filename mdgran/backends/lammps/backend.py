@@ -304,7 +304,7 @@ class LammpsBackend(Backend):
                     "fix_modify contact energy yes"):
             lmp.command(cmd)
         self._events_read = 0
-        self._read_events = None  # native_plugin.event_reader, at the first events
+        self._read_events = native_plugin.event_reader(self.plugin)  # the fix's events
         self._initial_state(lmp)  # thermal velocities (the fix reads v at its set-up)
         if self.table_file is not None and self.table is not None and self.rank == 0:
             self.table.write_lammps(self.table_file)
@@ -639,8 +639,6 @@ class LammpsBackend(Backend):
         contact, kind, step) as :class:`Events`, copied in one call (read one value at a time
         through LAMMPS's library interface, an event cost ~10 us), and released: the fix holds
         a frame's events, not the run's."""
-        if self._read_events is None:
-            self._read_events = native_plugin.event_reader(self.plugin)
         rows = np.empty((end - first, 4))
         got = self._read_events(self.lmp.lmp, b"contact", first, end - first,
                                 rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 1)
