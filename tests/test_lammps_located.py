@@ -297,6 +297,37 @@ def test_active_chain_is_the_fast_backends(plugin):
     assert np.abs(a.x - b.x).max() < 1e-9 and np.abs(a.v - b.v).max() < 1e-9
 
 
+def test_forces_reach_every_output_and_every_fix_that_may_read_them(plugin, tmp_path):
+    """A located step puts its accelerations into LAMMPS's force array only when something
+    reads it at the end of the step: output (here a dump every 7 steps, thermo), the run's last
+    step, another fix after the forces.  The dumped forces, with the contact fix alone, are
+    those of the same run with a fix print (end_of_step: then every step writes them), bit for
+    bit, on 1 rank and on 2 (events in windows on both sides of the rank boundary), and so is
+    the motion."""
+    alone = spread(plugin).replace("fix line all setforce NULL 0.0 0.0", "").replace(
+        "thermo 1200\n", "thermo 1200\ndump d all custom 7 f.${tag} id fx\n"
+        "dump_modify d sort id format float %.17g\n")
+    printed = alone.replace("fix_modify contact energy yes",
+                            'fix_modify contact energy yes\nfix p all print 100000 "-"')
+    lmp = shutil.which("lmp") or str(Path(sys.executable).with_name("lmp"))
+    dumps, finals = {}, {}
+    for ranks in (1, 2):
+        for name, text in (("alone", alone), ("printed", printed)):
+            tag = f"{name}{ranks}"
+            (tmp_path / f"{tag}.in").write_text(text)
+            cmd = [lmp] if ranks == 1 else [MPIEXEC, "-n", "2", lmp]
+            out = subprocess.run([*cmd, "-var", "tag", tag, "-in", f"{tag}.in"], cwd=tmp_path,
+                                 capture_output=True, text=True, timeout=120)
+            assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+            dumps[tag] = (tmp_path / f"f.{tag}").read_text()
+            finals[tag] = (tmp_path / f"final.{tag}").read_text()
+    ref = dumps["printed1"]
+    fx = np.array([float(ln.split()[1]) for ln in ref.splitlines()
+                   if len(ln.split()) == 2 and ln.split()[0].isdigit()])
+    assert ref.count("ITEM: TIMESTEP") == 1200 // 7 + 1 and np.abs(fx).max() > 1.0
+    for tag in dumps:
+        assert dumps[tag] == ref, tag
+        assert finals[tag] == finals["printed1"], tag
 
 
 def test_event_table_in_one_call_is_the_global_array(plugin):
