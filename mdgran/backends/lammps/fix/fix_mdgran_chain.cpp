@@ -1119,13 +1119,13 @@ void FixMdgranChain::drift(double h)
 
 // The owned atoms' accelerations at the end of a pass of length h (located_pass: contact and
 // kick forces by left atom), which become the next step's a0 (aprev), and the kick of the
-// moving ones, v = v_half + h/2 a_kick (h = 0: v unchanged).  last: LAMMPS's force array gets
-// the acceleration (mass 1) for its computes and dumps (forces_read).  One loop over the
+// moving ones, v = v_half + h/2 a_kick (h = 0: v unchanged).  write_f: LAMMPS's force array
+// gets the acceleration (mass 1) for its computes and dumps (forces_read).  One loop over the
 // atoms (a separate kick loop cost ~15% of a step, memory traffic).
-void FixMdgranChain::accelerate(double h, int last)
+void FixMdgranChain::accelerate(double h, int write_f)
 {
-  if (extended) accelerate_t<true>(h, last);
-  else accelerate_t<false>(h, last);
+  if (extended) accelerate_t<true>(h, write_f);
+  else accelerate_t<false>(h, write_f);
 }
 
 // Acceleration a and kick acceleration av of atom i (not a wall) from the forces of its left
@@ -1165,7 +1165,7 @@ inline void FixMdgranChain::bead_acc(int i, double fl, double fr, double fvl, do
 }
 
 // accelerate of the homogeneous chain (EXT false) or of unlike beads or a damped substrate
-template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
+template <bool EXT> void FixMdgranChain::accelerate_t(double h, int write_f)
 {
   double *v = flat(atom->v), *f = flat(atom->f);
   double *const aprev_ = aprev;    // members as locals (see located_pass)
@@ -1187,7 +1187,7 @@ template <bool EXT> void FixMdgranChain::accelerate_t(double h, int last)
       accel(i, a, av);
       aprev_[i] = a;
       v[3 * i] = v[3 * i] + hh * av;
-      if (last) f[3 * i] += a;
+      if (write_f) f[3 * i] += a;
     }
   for (int i : still) {    // walls (a = 0) and atoms outside the fix group (not moved)
     const tagint t = atom->tag[i];
@@ -2451,8 +2451,8 @@ void FixMdgranChain::commit_windows()
 // fix runs after the forces (at post_force, final_integrate or end_of_step: fix ave/atom, fix
 // print, fix halt ... whose computes and variables may read f).  Otherwise the array keeps
 // LAMMPS's zeros: the fix moves the atoms with its own accelerations, and writing them on
-// every step cost ~4 % of a step on one rank and ~6 % on two, at 1e6 beads (one row of three
-// doubles per atom through the memory bus).
+// every step cost ~3 % of a step at 1e6 beads, on one rank and on two (a row of three doubles
+// per atom through the memory bus).
 int FixMdgranChain::forces_read() const
 {
   const bigint step = update->ntimestep;

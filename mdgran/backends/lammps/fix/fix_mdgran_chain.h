@@ -217,12 +217,12 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   inline const std::vector<int> &active_runs() const { return front_all ? runs : front_runs; }
   double located_pass(double h);
   template <bool MIX> double located_pass_t(double h);
-  template <bool EXT> void accelerate_t(double h, int last);
+  template <bool EXT> void accelerate_t(double h, int write_f);
   template <bool EXT>
   inline void bead_acc(int i, double fl, double fr, double fvl, double fvr, double ui,
                        double wi, double k1_, double k3_, double &a, double &av) const;
   void drift(double h);
-  void accelerate(double h, int last);
+  void accelerate(double h, int write_f);
   void located_step();
   void located_setup();
   double first_root(const Con &c, double h) const;
