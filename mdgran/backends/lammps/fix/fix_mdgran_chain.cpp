@@ -145,8 +145,7 @@ static constexpr double PI = 3.141592653589793;    // Python's math.pi (the puls
 FixMdgranChain::FixMdgranChain(LAMMPS *lmp, int narg, char **arg) :
     Fix(lmp, narg, arg), x0(nullptr), closed(nullptr), dprev(nullptr), aprev(nullptr),
     xs(nullptr), vs(nullptr), fcon(nullptr), u(nullptr), w(nullptr), left(nullptr),
-    fkick(nullptr), nmax_scratch(0), contacts_stale(1), drift_h(-1.0),
-    put_forces(1)
+    fkick(nullptr), nmax_scratch(0), contacts_stale(1), drift_h(-1.0)
 {
   hertz = 0;
   fc = 0.0;
@@ -1806,9 +1805,9 @@ void FixMdgranChain::located_step()
     local_events(t0, dt, viscous, power, work_w);
     set_drive_time(t0 + dt);
   }
-  put_forces = forces_read();
-  accelerate(dt, put_forces);
-  if (!wout.empty()) commit_windows();
+  const int write_f = forces_read();
+  accelerate(dt, write_f);
+  if (!wout.empty()) commit_windows(write_f);
   advance_front();
   if (front_lo <= front_hi) take_in(moved_lo, moved_hi, front_lo, front_hi);
   add_visc(0.5 * dt * (power_prev + p1) + viscous);
@@ -2433,15 +2432,15 @@ void FixMdgranChain::local_events(double t0, double dt, double &viscous, double 
 }
 
 // The windows' end states of the owned atoms in place of the pass's: x, v, the acceleration
-// (the next step's a0) and, when accelerate gave it the pass's (put_forces), LAMMPS's force
+// (the next step's a0) and, when accelerate gave it the pass's (write_f), LAMMPS's force
 // array
-void FixMdgranChain::commit_windows()
+void FixMdgranChain::commit_windows(int write_f)
 {
   double *x = flat(atom->x), *v = flat(atom->v), *f = flat(atom->f);
   for (const Out &o : wout) {
     x[3 * o.i] = o.x;
     v[3 * o.i] = o.v;
-    if (put_forces) f[3 * o.i] = (f[3 * o.i] - aprev[o.i]) + o.a;
+    if (write_f) f[3 * o.i] = (f[3 * o.i] - aprev[o.i]) + o.a;
     aprev[o.i] = o.a;
   }
 }

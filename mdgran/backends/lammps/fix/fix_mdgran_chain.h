@@ -299,8 +299,7 @@ class FixMdgranChain : public Fix, public MdgranLaw {
   void undo_pending(size_t mark);
   void widen(size_t k, int grow);
   void local_events(double t0, double dt, double &viscous, double &power, double &work);
-  void commit_windows();
-  int put_forces;                           // this step's accelerations go into LAMMPS's f
+  void commit_windows(int write_f);
   int forces_read() const;                  // LAMMPS's f is read at the end of this step
   // first element of a LAMMPS per-atom array of rows (x, v, f: one block, 3 per atom)
   static double *flat(double **a) { return a ? a[0] : nullptr; }
